@@ -1,0 +1,177 @@
+"""Spatial hash for the reverse query (world point → arc length, lateral offset).
+
+The mat is cut into square cells; each cell lists the segments that pass within
+``reach`` of it. A query projects the point exactly onto the few segments of its cell,
+so its cost does not grow with the track's length. Points farther than ``reach`` from
+the road fall back to all segments (still exact, just slower).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numba import njit
+
+from .geometry import pose_at, project
+
+if TYPE_CHECKING:
+    from .model import SegmentTable
+
+CELL_M: float = 0.5
+"""Edge of a grid cell [m]."""
+
+EXTRA_REACH_M: float = 0.6
+"""How far beyond the road's outer edge [m] a point still gets the fast, cell-local
+answer (an off-road car is detected well within this)."""
+
+HINT_WINDOW_M: float = 1.0
+"""With an arc-length hint, candidates within this arc distance [m] of the hint are
+preferred: at a crossing this keeps the branch the car is on."""
+
+_SAMPLE_STEP_M = 0.05
+
+
+@dataclass(frozen=True)
+class GridIndex:
+    """Cells in row-major order; the segments of cell ``c`` are
+    ``items[cell_start[c]:cell_start[c + 1]]``."""
+
+    x0: float
+    y0: float
+    cell_m: float
+    nx: int
+    ny: int
+    cell_start: np.ndarray
+    items: np.ndarray
+
+
+def build_index(table: SegmentTable, half_road_m: float, cell_m: float = CELL_M) -> GridIndex:
+    """Register each segment in every cell within ``half_road_m + EXTRA_REACH_M`` of it."""
+    reach = half_road_m + EXTRA_REACH_M + _SAMPLE_STEP_M
+    xs, ys, segs = [], [], []
+    for j in range(len(table.length)):
+        n = max(2, math.ceil(table.length[j] / _SAMPLE_STEP_M) + 1)
+        for u in np.linspace(0.0, table.length[j], n):
+            x, y, _ = pose_at(table.x0[j], table.y0[j], table.h0[j], table.kappa[j], u)
+            xs.append(x)
+            ys.append(y)
+            segs.append(j)
+    xs_a, ys_a, seg_a = np.array(xs), np.array(ys), np.array(segs, dtype=np.int64)
+    gx0 = xs_a.min() - reach - cell_m
+    gy0 = ys_a.min() - reach - cell_m
+    nx = int(math.ceil((xs_a.max() + reach + cell_m - gx0) / cell_m)) + 1
+    ny = int(math.ceil((ys_a.max() + reach + cell_m - gy0) / cell_m)) + 1
+    span = int(math.ceil(reach / cell_m)) + 1
+    offsets = np.arange(-span, span + 1)
+    ci = np.floor((xs_a - gx0) / cell_m).astype(np.int64)
+    cj = np.floor((ys_a - gy0) / cell_m).astype(np.int64)
+    # Every (sample, neighbour cell) pair whose cell square lies within reach of the sample.
+    ii = (ci[:, None, None] + offsets[None, :, None]).repeat(len(offsets), axis=2)
+    jj = (cj[:, None, None] + offsets[None, None, :]).repeat(len(offsets), axis=1)
+    cx_lo = gx0 + ii * cell_m
+    cy_lo = gy0 + jj * cell_m
+    dx = np.maximum(0.0, np.maximum(cx_lo - xs_a[:, None, None], xs_a[:, None, None] - cx_lo - cell_m))
+    dy = np.maximum(0.0, np.maximum(cy_lo - ys_a[:, None, None], ys_a[:, None, None] - cy_lo - cell_m))
+    near = (dx * dx + dy * dy <= reach * reach) & (ii >= 0) & (ii < nx) & (jj >= 0) & (jj < ny)
+    cells = (jj * nx + ii)[near]
+    seg_ids = np.broadcast_to(seg_a[:, None, None], near.shape)[near]
+    pairs = np.unique(cells * (len(table.length) + 1) + seg_ids)
+    cell_of = pairs // (len(table.length) + 1)
+    items = (pairs % (len(table.length) + 1)).astype(np.int64)
+    counts = np.bincount(cell_of, minlength=nx * ny)
+    cell_start = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+    return GridIndex(float(gx0), float(gy0), float(cell_m), nx, ny, cell_start, items)
+
+
+@njit(cache=True)
+def locate_point(
+    px: float,
+    py: float,
+    s_hint: float,
+    x0: np.ndarray,
+    y0: np.ndarray,
+    h0: np.ndarray,
+    kappa: np.ndarray,
+    length: np.ndarray,
+    s0: np.ndarray,
+    total: float,
+    closed: bool,
+    half_road: float,
+    gx0: float,
+    gy0: float,
+    cell: float,
+    nx: int,
+    ny: int,
+    cell_start: np.ndarray,
+    items: np.ndarray,
+) -> tuple[float, float, float]:
+    """``(s [m], d [m], distance [m])`` of the centre-line point nearest to ``(px, py)``.
+
+    ``s_hint`` is NaN for no hint. With a hint, the nearest candidate whose arc length
+    lies within ``HINT_WINDOW_M`` of it wins, if it is on the road.
+    """
+    ci = int(math.floor((px - gx0) / cell))
+    cj = int(math.floor((py - gy0) / cell))
+    lo = 0
+    hi = 0
+    if 0 <= ci < nx and 0 <= cj < ny:
+        c = cj * nx + ci
+        lo = cell_start[c]
+        hi = cell_start[c + 1]
+    use_all = hi <= lo
+    n = len(length) if use_all else hi - lo
+    best = (math.inf, 0.0, 0.0)  # (distance, s, d)
+    near = (math.inf, 0.0, 0.0)  # best among candidates near the hint
+    for k in range(n):
+        j = k if use_all else items[lo + k]
+        u, d, dist = project(x0[j], y0[j], h0[j], kappa[j], 0.0, length[j], px, py)
+        s = s0[j] + u
+        if closed and s >= total:
+            s -= total
+        if dist < best[0]:
+            best = (dist, s, d)
+        if s_hint == s_hint:  # not NaN
+            ds = abs(s - s_hint)
+            if closed:
+                ds = min(ds, total - ds)
+            if ds <= HINT_WINDOW_M and dist < near[0]:
+                near = (dist, s, d)
+    if near[0] <= half_road:
+        return near[1], near[2], near[0]
+    return best[1], best[2], best[0]
+
+
+@njit(cache=True)
+def locate_points(
+    pts: np.ndarray,
+    x0: np.ndarray,
+    y0: np.ndarray,
+    h0: np.ndarray,
+    kappa: np.ndarray,
+    length: np.ndarray,
+    s0: np.ndarray,
+    total: float,
+    closed: bool,
+    half_road: float,
+    gx0: float,
+    gy0: float,
+    cell: float,
+    nx: int,
+    ny: int,
+    cell_start: np.ndarray,
+    items: np.ndarray,
+) -> np.ndarray:
+    """``locate_point`` for an ``(N, 2)`` array; returns ``(3, N)``: s, d, distance [m]."""
+    out = np.empty((3, pts.shape[0]))
+    for i in range(pts.shape[0]):
+        s, d, dist = locate_point(
+            pts[i, 0], pts[i, 1], math.nan, x0, y0, h0, kappa, length, s0, total, closed,
+            half_road, gx0, gy0, cell, nx, ny, cell_start, items,
+        )
+        out[0, i] = s
+        out[1, i] = d
+        out[2, i] = dist
+    return out

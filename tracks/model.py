@@ -1,0 +1,353 @@
+"""The track model: a chain of straight and arc segments plus the road's elements.
+
+Coordinates: world frame in metres, x right / y up (a top view of the mat); headings in
+radians, counter-clockwise from +x. The arc length ``s`` [m] runs along the road's
+centre line (the dashed line) from the start pose; the lateral offset ``d`` [m] is
+positive to the left of the driving direction. Cars drive on the right lane,
+``-lane_width < d < 0``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from enum import Enum
+from functools import cached_property
+
+import numpy as np
+
+from .geometry import pose_at
+from .index import GridIndex, build_index, locate_point, locate_points
+from .rules import LANE_WIDTH_M, LINE_WIDTH_M
+
+
+class Line(Enum):
+    """The three longitudinal lines of a road, seen in the driving direction."""
+
+    LEFT = "left"
+    CENTRE = "centre"
+    RIGHT = "right"
+
+    @property
+    def offset_factor(self) -> int:
+        """Lateral position of the line's centre in lane widths (left = +1)."""
+        return {Line.LEFT: 1, Line.CENTRE: 0, Line.RIGHT: -1}[self]
+
+
+class Lane(Enum):
+    """A lane of the road; ``OFF_ROAD`` for points outside both side lines."""
+
+    RIGHT = "right"
+    LEFT = "left"
+    OFF_ROAD = "off_road"
+
+
+@dataclass(frozen=True)
+class Straight:
+    """A straight segment of ``length_m`` [m]."""
+
+    length_m: float
+
+    @property
+    def curvature(self) -> float:
+        return 0.0
+
+
+@dataclass(frozen=True)
+class Arc:
+    """A circular arc of centre-line radius ``radius_m`` [m] turning by ``angle_rad`` [rad]
+    (positive = left / counter-clockwise)."""
+
+    radius_m: float
+    angle_rad: float
+
+    @property
+    def length_m(self) -> float:
+        return self.radius_m * abs(self.angle_rad)
+
+    @property
+    def curvature(self) -> float:
+        return math.copysign(1.0 / self.radius_m, self.angle_rad)
+
+
+Segment = Straight | Arc
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A pose on the mat: position [m] and heading [rad]."""
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+    heading_rad: float = 0.0
+
+
+@dataclass(frozen=True)
+class Gap:
+    """A stretch where ``line`` is not painted: from ``s_m`` for ``length_m`` [m]."""
+
+    line: Line
+    s_m: float
+    length_m: float
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A white carton standing in ``lane``; its centre is at arc length ``s_m`` [m] and
+    ``offset_m`` [m] left of the lane's centre. Sizes [m]: ``length_m`` along the road,
+    ``width_m`` across, ``height_m`` up. The box is aligned with the road at ``s_m``."""
+
+    s_m: float
+    lane: Lane
+    length_m: float
+    width_m: float
+    height_m: float
+    offset_m: float = 0.0
+
+
+@dataclass(frozen=True)
+class Intersection:
+    """A right-angled crossing of the road with itself: the centre line passes the same
+    point at arc lengths ``s1_m`` and ``s2_m`` [m]."""
+
+    s1_m: float
+    s2_m: float
+
+
+@dataclass(frozen=True)
+class Location:
+    """Answer of the reverse query: arc length [m], lateral offset [m] (left > 0), lane,
+    and distance [m] from the nearest centre-line point."""
+
+    s_m: float
+    lateral_m: float
+    lane: Lane
+    distance_m: float
+
+
+@dataclass(frozen=True)
+class SegmentTable:
+    """The chain laid out in the world: one entry per segment (arrays of equal length)."""
+
+    x0: np.ndarray
+    y0: np.ndarray
+    h0: np.ndarray
+    kappa: np.ndarray
+    length: np.ndarray
+    s0: np.ndarray
+    end: Pose
+
+
+def _finite_positive(value: float, what: str) -> None:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+        raise ValueError(f"{what} must be a finite number > 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class Track:
+    """A Carolo-Cup road: a chain of segments from ``start`` plus its markings' elements.
+
+    ``closed`` tracks are circuits (the chain must end where it starts); open tracks are
+    test strips. Whether the track obeys the rules is checked by
+    ``tracks.rules.validate``; the constructor only rejects values that have no geometric
+    meaning (negative lengths, zero radius, NaN).
+    """
+
+    segments: tuple[Segment, ...]
+    closed: bool = True
+    start: Pose = field(default_factory=Pose)
+    lane_width_m: float = LANE_WIDTH_M
+    start_line_s_m: float | None = None
+    gaps: tuple[Gap, ...] = ()
+    obstacles: tuple[Obstacle, ...] = ()
+    intersections: tuple[Intersection, ...] = ()
+    name: str = ""
+    description: str = ""
+    seed: int | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("segments", "gaps", "obstacles", "intersections"):
+            object.__setattr__(self, name, tuple(getattr(self, name)))
+        if not self.segments:
+            raise ValueError("a track needs at least one segment")
+        for i, seg in enumerate(self.segments):
+            if isinstance(seg, Straight):
+                _finite_positive(seg.length_m, f"segments[{i}].length_m")
+            elif isinstance(seg, Arc):
+                _finite_positive(seg.radius_m, f"segments[{i}].radius_m")
+                if not math.isfinite(seg.angle_rad) or not 0 < abs(seg.angle_rad) <= 2 * math.pi:
+                    raise ValueError(
+                        f"segments[{i}].angle_rad must be non-zero and within ±2π, "
+                        f"got {seg.angle_rad!r}"
+                    )
+            else:
+                raise TypeError(f"segments[{i}] must be Straight or Arc, got {type(seg).__name__}")
+        _finite_positive(self.lane_width_m, "lane_width_m")
+        for v, what in ((self.start.x_m, "start.x_m"), (self.start.y_m, "start.y_m"),
+                        (self.start.heading_rad, "start.heading_rad")):
+            if not math.isfinite(v):
+                raise ValueError(f"{what} must be finite, got {v!r}")
+
+    # ------------------------------------------------------------------ layout
+    @cached_property
+    def table(self) -> SegmentTable:
+        """Start pose, curvature, length and start arc length of every segment."""
+        n = len(self.segments)
+        x0 = np.empty(n)
+        y0 = np.empty(n)
+        h0 = np.empty(n)
+        kappa = np.array([seg.curvature for seg in self.segments], dtype=np.float64)
+        length = np.array([seg.length_m for seg in self.segments], dtype=np.float64)
+        s0 = np.concatenate(([0.0], np.cumsum(length)[:-1]))
+        x, y, h = self.start.x_m, self.start.y_m, self.start.heading_rad
+        for i in range(n):
+            x0[i], y0[i], h0[i] = x, y, h
+            x, y, h = pose_at(x, y, h, kappa[i], length[i])
+        return SegmentTable(x0, y0, h0, kappa, length, s0, Pose(x, y, h))
+
+    @property
+    def length_m(self) -> float:
+        """Length of the centre line [m]."""
+        t = self.table
+        return float(t.s0[-1] + t.length[-1])
+
+    @property
+    def end_pose(self) -> Pose:
+        """Pose at the end of the chain (equals ``start`` for a well-closed loop)."""
+        return self.table.end
+
+    @property
+    def half_road_m(self) -> float:
+        """Distance from the centre line to the outer edge of a side line [m]."""
+        return self.lane_width_m + 0.5 * LINE_WIDTH_M
+
+    def closure_error(self) -> tuple[float, float]:
+        """Gap between the chain's end and its start: distance [m], heading [rad]."""
+        end = self.end_pose
+        dist = math.hypot(end.x_m - self.start.x_m, end.y_m - self.start.y_m)
+        dh = (end.heading_rad - self.start.heading_rad + math.pi) % (2 * math.pi) - math.pi
+        return dist, abs(dh)
+
+    @property
+    def min_centre_radius_m(self) -> float:
+        """Smallest centre-line radius of any arc [m] (inf for a track of straights)."""
+        radii = [seg.radius_m for seg in self.segments if isinstance(seg, Arc)]
+        return min(radii) if radii else math.inf
+
+    # ----------------------------------------------------------- forward query
+    def _segment_of(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Segment index and local coordinate [m] for arc lengths ``s`` [m]."""
+        total = self.length_m
+        s = np.asarray(s, dtype=np.float64)
+        if not np.all(np.isfinite(s)):
+            raise ValueError("arc length s must be finite")
+        if self.closed:
+            s = np.mod(s, total)
+        elif np.any((s < -1e-9) | (s > total + 1e-9)):
+            bad = s[(s < -1e-9) | (s > total + 1e-9)].ravel()[0]
+            raise ValueError(
+                f"s = {bad:.6g} m is outside the open track [0, {total:.6g}] m; "
+                "only closed tracks wrap around"
+            )
+        t = self.table
+        idx = np.clip(np.searchsorted(t.s0, s, side="right") - 1, 0, len(t.s0) - 1)
+        return idx, s - t.s0[idx]
+
+    def pose(self, s: np.ndarray | float, lateral_m: np.ndarray | float = 0.0
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """World ``x [m], y [m], heading [rad]`` at arc length ``s`` and lateral offset.
+
+        Vectorised over ``s``; O(log n) per query (binary search over segment starts).
+        """
+        idx, u = self._segment_of(s)
+        t = self.table
+        h0 = t.h0[idx]
+        k = t.kappa[idx]
+        h = h0 + k * u
+        straight = k == 0.0
+        safe_k = np.where(straight, 1.0, k)
+        x = np.where(straight, t.x0[idx] + u * np.cos(h0),
+                     t.x0[idx] + (np.sin(h) - np.sin(h0)) / safe_k)
+        y = np.where(straight, t.y0[idx] + u * np.sin(h0),
+                     t.y0[idx] - (np.cos(h) - np.cos(h0)) / safe_k)
+        lat = np.asarray(lateral_m, dtype=np.float64)
+        return x - lat * np.sin(h), y + lat * np.cos(h), h
+
+    def position(self, s: np.ndarray | float, lateral_m: np.ndarray | float = 0.0) -> np.ndarray:
+        """World position ``(..., 2)`` [m] at arc length ``s`` [m] and lateral offset [m]."""
+        x, y, _ = self.pose(s, lateral_m)
+        return np.stack([x, y], axis=-1)
+
+    def heading(self, s: np.ndarray | float) -> np.ndarray:
+        """Centre-line heading [rad] at arc length ``s`` [m]."""
+        return self.pose(s)[2]
+
+    def curvature(self, s: np.ndarray | float) -> np.ndarray:
+        """Signed centre-line curvature [1/m] at arc length ``s`` [m] (left > 0)."""
+        idx, _ = self._segment_of(s)
+        return self.table.kappa[idx]
+
+    def sample(self, step_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """Arc lengths [m] every ``step_m`` (and the end for open tracks) and their
+        centre-line points ``(N, 2)`` [m]."""
+        total = self.length_m
+        n = max(2, math.ceil(total / step_m))
+        s = np.linspace(0.0, total, n + 1)
+        if self.closed:
+            s = s[:-1]
+        return s, self.position(s)
+
+    def bounds(self, margin_m: float = 0.0) -> tuple[float, float, float, float]:
+        """Bounding box ``(xmin, ymin, xmax, ymax)`` [m] of the road plus ``margin_m``."""
+        _, pts = self.sample(0.02)
+        pad = self.half_road_m + margin_m + 0.01
+        lo = pts.min(axis=0) - pad
+        hi = pts.max(axis=0) + pad
+        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
+
+    # ----------------------------------------------------------- reverse query
+    @cached_property
+    def index(self) -> GridIndex:
+        """Spatial hash of the segments for O(1) reverse queries (built on first use)."""
+        return build_index(self.table, self.half_road_m)
+
+    def locate(self, x_m: float, y_m: float, s_hint_m: float | None = None) -> Location:
+        """Reverse query: world point → arc length, lateral offset, lane.
+
+        Looks only at the segments registered in the point's grid cell (O(1) on average).
+        Where the road crosses itself, the candidate nearest to ``s_hint_m`` (e.g. the
+        car's arc length one step ago) wins among those the point lies on.
+        """
+        if not (math.isfinite(x_m) and math.isfinite(y_m)):
+            raise ValueError(f"locate needs a finite point, got ({x_m!r}, {y_m!r})")
+        hint = math.nan if s_hint_m is None else float(s_hint_m)
+        t = self.table
+        g = self.index
+        s, d, dist = locate_point(
+            float(x_m), float(y_m), hint, t.x0, t.y0, t.h0, t.kappa, t.length, t.s0,
+            self.length_m, self.closed, self.half_road_m,
+            g.x0, g.y0, g.cell_m, g.nx, g.ny, g.cell_start, g.items,
+        )
+        return Location(s, d, self.lane_at(d), dist)
+
+    def lane_at(self, lateral_m: float) -> Lane:
+        """Lane for a lateral offset [m] (a point on the centre line counts as left)."""
+        if abs(lateral_m) > self.half_road_m:
+            return Lane.OFF_ROAD
+        return Lane.LEFT if lateral_m >= 0.0 else Lane.RIGHT
+
+    def locate_many(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Vectorised ``locate`` (no hint) for ``(N, 2)`` points [m]: arc lengths,
+        lateral offsets and distances [m]."""
+        pts = np.ascontiguousarray(points, dtype=np.float64)
+        if pts.ndim != 2 or pts.shape[1] != 2:
+            raise ValueError(f"locate_many expects an (N, 2) array of points, got {pts.shape}")
+        if not np.all(np.isfinite(pts)):
+            raise ValueError("locate_many needs finite points")
+        t = self.table
+        g = self.index
+        out = locate_points(
+            pts, t.x0, t.y0, t.h0, t.kappa, t.length, t.s0, self.length_m, self.closed,
+            self.half_road_m, g.x0, g.y0, g.cell_m, g.nx, g.ny, g.cell_start, g.items,
+        )
+        return out[0], out[1], out[2]
