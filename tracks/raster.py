@@ -1,0 +1,333 @@
+"""Top-down rasterisation of a track's markings: an intensity map and a label map.
+
+The intensity map is white paint on a black mat (uint8, 255 = fully painted pixel), with
+edges anti-aliased by the exact area a pixel shares with a line (box filter, measured
+across and along the road). The label map says which marking a pixel belongs to; pixels
+where a marking *would* run but is not painted (the gaps between centre-line dashes, rule
+gaps in a line) carry the marking's id with the ``VIRTUAL`` bit, so ground truth can paint
+the dashed centre line continuous as the thesis does.
+
+Pixel convention (as OpenCV's): pixel ``(row, col)`` has its centre at
+``x = origin_x + (col + 0.5)·res``, ``y = origin_y − (row + 0.5)·res``; rows grow
+southward (−y). ``MarkingMap.world_to_pixel`` returns coordinates with pixel centres at
+integers, ready for ``cv2.remap``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numba import njit
+
+from . import rules
+from .geometry import pose_at
+
+if TYPE_CHECKING:
+    from .model import Track
+
+DEFAULT_RESOLUTION_M: float = 0.004
+"""Default edge of a map pixel [m] (issue 2: at most 4 mm)."""
+
+CHUNK_M: float = 0.25
+"""Road is painted in chunks of at most this length [m], each in its own bounding box."""
+
+VIRTUAL: int = 0x80
+"""Label bit: the marking runs here but is not painted (dash gap or rule gap)."""
+
+
+class Marking(IntEnum):
+    """Label ids of the marking map (``labels & ~VIRTUAL``)."""
+
+    NONE = 0
+    RIGHT_LINE = 1
+    CENTRE_LINE = 2
+    LEFT_LINE = 3
+    START_LINE = 4
+    STOP_LINE = 5
+
+
+@dataclass(frozen=True)
+class MarkingMap:
+    """Rasterised markings. ``intensity`` and ``labels`` are ``(H, W)`` uint8 arrays;
+    ``origin_m`` is the world position [m] of the map's top-left corner, ``resolution_m``
+    the edge of one pixel [m]."""
+
+    intensity: np.ndarray
+    labels: np.ndarray
+    origin_m: tuple[float, float]
+    resolution_m: float
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.intensity.shape  # type: ignore[return-value]
+
+    def world_to_pixel(self, xy: np.ndarray) -> np.ndarray:
+        """``(..., 2)`` world points [m] → ``(..., 2)`` (col, row) [px], centres at integers."""
+        xy = np.asarray(xy, dtype=np.float64)
+        col = (xy[..., 0] - self.origin_m[0]) / self.resolution_m - 0.5
+        row = (self.origin_m[1] - xy[..., 1]) / self.resolution_m - 0.5
+        return np.stack([col, row], axis=-1)
+
+    def pixel_to_world(self, colrow: np.ndarray) -> np.ndarray:
+        """Inverse of ``world_to_pixel``."""
+        colrow = np.asarray(colrow, dtype=np.float64)
+        x = self.origin_m[0] + (colrow[..., 0] + 0.5) * self.resolution_m
+        y = self.origin_m[1] - (colrow[..., 1] + 0.5) * self.resolution_m
+        return np.stack([x, y], axis=-1)
+
+
+@njit(cache=True)
+def _band(v: float, lo: float, hi: float, res: float) -> float:
+    """Share of the pixel interval ``[v − res/2, v + res/2]`` inside ``[lo, hi]``."""
+    a = max(v - 0.5 * res, lo)
+    b = min(v + 0.5 * res, hi)
+    return max(0.0, b - a) / res
+
+
+@njit(cache=True)
+def _cyclic_band(s: float, lo: float, hi: float, res: float, total: float, closed: bool) -> float:
+    if not closed:
+        return _band(s, lo, hi, res)
+    return max(_band(s, lo - total, hi - total, res), _band(s, lo, hi, res),
+               _band(s, lo + total, hi + total, res))
+
+
+@njit(cache=True)
+def _dash_integral(x: float, dash: float, period: float) -> float:
+    """Painted length of the dashed line on ``[0, x]`` (dashes start at s = 0)."""
+    k = math.floor(x / period)
+    return k * dash + min(x - k * period, dash)
+
+
+@njit(cache=True)
+def _paint_pixel(
+    cov: np.ndarray,
+    labels: np.ndarray,
+    r: int,
+    q: int,
+    s: float,
+    d: float,
+    res: float,
+    total: float,
+    closed: bool,
+    lane_w: float,
+    line_w: float,
+    dash: float,
+    period: float,
+    gap_line: np.ndarray,
+    gap_lo: np.ndarray,
+    gap_hi: np.ndarray,
+    passes: np.ndarray,
+    start_s: float,
+    start_w: float,
+    stop_w: float,
+) -> None:
+    """Paint one pixel at road coordinates ``(s, d)`` [m]."""
+    half_road = lane_w + 0.5 * line_w
+    # Intersections: no lines inside the crossing road, stop lines before it.
+    cut = 0.0
+    stop = 0.0
+    for sx in passes:
+        cut = max(cut, _cyclic_band(s, sx - half_road, sx + half_road, res, total, closed))
+        stop = max(stop, _cyclic_band(s, sx - half_road - stop_w, sx - half_road, res, total,
+                                      closed) * _band(d, -half_road, 0.0, res))
+        stop = max(stop, _cyclic_band(s, sx + half_road, sx + half_road + stop_w, res, total,
+                                      closed) * _band(d, 0.0, half_road, res))
+    best_paint = 0.0
+    best_label = 0
+    best_virtual = 0.0
+    virtual_label = 0
+    for li in range(3):  # 0 right, 1 centre, 2 left
+        dl = (li - 1) * lane_w
+        across = _band(d, dl - 0.5 * line_w, dl + 0.5 * line_w, res)
+        if across == 0.0:
+            continue
+        runs = across * (1.0 - cut)
+        missing = 0.0
+        for g in range(len(gap_line)):
+            if gap_line[g] == li:
+                missing += _cyclic_band(s, gap_lo[g], gap_hi[g], res, total, closed)
+        paint = runs * max(0.0, 1.0 - missing)
+        if li == 1:
+            paint *= (_dash_integral(s + 0.5 * res, dash, period)
+                      - _dash_integral(s - 0.5 * res, dash, period)) / res
+        if paint > best_paint:
+            best_paint = paint
+            best_label = li + 1
+        if runs > best_virtual:
+            best_virtual = runs
+            virtual_label = li + 1
+    if start_s == start_s:  # a start line exists
+        paint = (_cyclic_band(s, start_s - 0.5 * start_w, start_s + 0.5 * start_w, res, total,
+                              closed) * _band(d, -half_road, half_road, res))
+        if paint > best_paint:
+            best_paint = paint
+            best_label = 4
+    if stop > best_paint:
+        best_paint = stop
+        best_label = 5
+    before = cov[r, q]
+    if best_paint > before:
+        cov[r, q] = min(1.0, best_paint)
+    if best_paint >= 0.5 and best_paint >= before:
+        labels[r, q] = best_label
+    elif best_virtual >= 0.5 and labels[r, q] == 0:
+        labels[r, q] = virtual_label | 0x80
+
+
+@njit(cache=True)
+def _near_line(d: float, lane_w: float, reach: float) -> bool:
+    return abs(d + lane_w) <= reach or abs(d) <= reach or abs(d - lane_w) <= reach
+
+
+@njit(cache=True)
+def _raster_kernel(
+    cov: np.ndarray,
+    labels: np.ndarray,
+    ox: float,
+    oy: float,
+    res: float,
+    x0: np.ndarray,
+    y0: np.ndarray,
+    h0: np.ndarray,
+    kappa: np.ndarray,
+    length: np.ndarray,
+    s0: np.ndarray,
+    total: float,
+    closed: bool,
+    lane_w: float,
+    line_w: float,
+    dash: float,
+    period: float,
+    gap_line: np.ndarray,
+    gap_lo: np.ndarray,
+    gap_hi: np.ndarray,
+    passes: np.ndarray,
+    start_s: float,
+    start_w: float,
+    stop_w: float,
+    chunk_m: float,
+) -> None:
+    n_rows, n_cols = cov.shape
+    half_road = lane_w + 0.5 * line_w
+    pad = half_road + 2.0 * res
+    line_reach = 0.5 * line_w + res
+    # Arc lengths around which a crossing marking (start or stop line) may be painted.
+    special = [start_s] if start_s == start_s else [0.0 for _ in range(0)]
+    for sx in passes:
+        special.append(sx)
+    special_reach = half_road + stop_w + 0.5 * start_w + 2.0 * res
+    for j in range(len(length)):
+        n_chunks = max(1, int(math.ceil(length[j] / chunk_m)))
+        ch = math.cos(h0[j])
+        sh = math.sin(h0[j])
+        arc = kappa[j] != 0.0
+        if arc:
+            inv = 1.0 / kappa[j]
+            sign = 1.0 if kappa[j] > 0.0 else -1.0
+            radius = abs(inv)
+            cx = x0[j] - sh * inv
+            cy = y0[j] + ch * inv
+            phi0 = math.atan2(y0[j] - cy, x0[j] - cx)
+        for c in range(n_chunks):
+            ua = length[j] * c / n_chunks
+            ub = length[j] * (c + 1) / n_chunks
+            last = c == n_chunks - 1
+            has_special = False
+            for sp in special:
+                lo_s = s0[j] + ua - special_reach
+                hi_s = s0[j] + ub + special_reach
+                for shift in (-total, 0.0, total):
+                    if lo_s <= sp + shift <= hi_s:
+                        has_special = True
+            xa, ya, _ = pose_at(x0[j], y0[j], h0[j], kappa[j], ua)
+            xb, yb, _ = pose_at(x0[j], y0[j], h0[j], kappa[j], ub)
+            xm, ym, _ = pose_at(x0[j], y0[j], h0[j], kappa[j], 0.5 * (ua + ub))
+            bow = 0.125 * (ub - ua) ** 2 * abs(kappa[j]) + pad
+            c_lo = max(0, int(math.floor((min(xa, xb, xm) - bow - ox) / res)))
+            c_hi = min(n_cols - 1, int(math.ceil((max(xa, xb, xm) + bow - ox) / res)))
+            r_lo = max(0, int(math.floor((oy - max(ya, yb, ym) - bow) / res)))
+            r_hi = min(n_rows - 1, int(math.ceil((oy - min(ya, yb, ym) + bow) / res)))
+            for r in range(r_lo, r_hi + 1):
+                py = oy - (r + 0.5) * res
+                q_lo = c_lo
+                q_hi = c_hi
+                if not arc:
+                    # u and d are linear in x along a row: clip the row to the chunk's band.
+                    dy = py - y0[j]
+                    for coef, base, lo_v, hi_v in ((ch, dy * sh, ua, ub), (-sh, dy * ch, -pad, pad)):
+                        # value(px) = coef * (px - x0) + base must lie in [lo_v, hi_v]
+                        if abs(coef) < 1e-12:
+                            if base < lo_v or base > hi_v:
+                                q_hi = -1
+                            continue
+                        xa_ = x0[j] + (lo_v - base) / coef
+                        xb_ = x0[j] + (hi_v - base) / coef
+                        q_lo = max(q_lo, int(math.floor((min(xa_, xb_) - ox) / res - 0.5)))
+                        q_hi = min(q_hi, int(math.ceil((max(xa_, xb_) - ox) / res - 0.5)))
+                for q in range(q_lo, q_hi + 1):
+                    px = ox + (q + 0.5) * res
+                    if arc:
+                        vx = px - cx
+                        vy = py - cy
+                        d = sign * (radius - math.hypot(vx, vy))
+                        if abs(d) > pad or not (has_special or _near_line(d, lane_w, line_reach)):
+                            continue
+                        u = ((sign * (math.atan2(vy, vx) - phi0)) % (2.0 * math.pi)) * radius
+                    else:
+                        dx = px - x0[j]
+                        dy = py - y0[j]
+                        d = -dx * sh + dy * ch
+                        if abs(d) > pad or not (has_special or _near_line(d, lane_w, line_reach)):
+                            continue
+                        u = dx * ch + dy * sh
+                    if u < ua or u > ub or (u == ub and not last):
+                        continue
+                    s = s0[j] + u
+                    if closed and s >= total:
+                        s -= total
+                    _paint_pixel(cov, labels, r, q, s, d, res, total, closed, lane_w, line_w,
+                                 dash, period, gap_line, gap_lo, gap_hi, passes, start_s,
+                                 start_w, stop_w)
+
+
+_LINE_INDEX = {"right": 0, "centre": 1, "left": 2}
+
+
+def rasterize(track: Track, resolution_m: float = DEFAULT_RESOLUTION_M,
+              margin_m: float = rules.MAT_EDGE_MARGIN_M) -> MarkingMap:
+    """Paint the track's markings top-down at ``resolution_m`` [m/px].
+
+    The map covers the road plus ``margin_m`` [m] of mat on every side (the rules' 300 mm
+    to the mat's edge by default).
+    """
+    if not (math.isfinite(resolution_m) and resolution_m > 0):
+        raise ValueError(f"resolution_m must be > 0, got {resolution_m!r}")
+    xmin, ymin, xmax, ymax = track.bounds(margin_m)
+    n_cols = int(math.ceil((xmax - xmin) / resolution_m))
+    n_rows = int(math.ceil((ymax - ymin) / resolution_m))
+    if n_cols * n_rows > 400_000_000:
+        raise ValueError(f"a {n_cols}×{n_rows} map is too large; use a coarser resolution_m")
+    cov = np.zeros((n_rows, n_cols), dtype=np.float32)
+    labels = np.zeros((n_rows, n_cols), dtype=np.uint8)
+    t = track.table
+    gaps = track.gaps
+    passes = np.array([s for x in track.intersections for s in (x.s1_m, x.s2_m)], dtype=np.float64)
+    _raster_kernel(
+        cov, labels, xmin, ymax, resolution_m,
+        t.x0, t.y0, t.h0, t.kappa, t.length, t.s0, track.length_m, track.closed,
+        track.lane_width_m, rules.LINE_WIDTH_M, rules.CENTRE_DASH_M,
+        rules.CENTRE_DASH_M + rules.CENTRE_DASH_GAP_M,
+        np.array([_LINE_INDEX[g.line.value] for g in gaps], dtype=np.int64),
+        np.array([g.s_m for g in gaps], dtype=np.float64),
+        np.array([g.s_m + g.length_m for g in gaps], dtype=np.float64),
+        passes,
+        math.nan if track.start_line_s_m is None else float(track.start_line_s_m),
+        rules.START_LINE_WIDTH_M, rules.STOP_LINE_WIDTH_M, CHUNK_M,
+    )
+    intensity = np.rint(cov * 255.0).astype(np.uint8)
+    return MarkingMap(intensity, labels, (xmin, ymax), float(resolution_m))
