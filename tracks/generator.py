@@ -226,8 +226,8 @@ def _assemble(poly: _Polygon, fil: tuple[list[Straight | Arc], list[int], np.nda
     return replace(track, intersections=(Intersection(min(passes), max(passes)),))
 
 
-def _free_interval(rng: np.random.Generator, track: Track, length: float, blocked: list[tuple[float, float]]
-                   ) -> float | None:
+def _free_interval(rng: np.random.Generator, track: Track, length: float,
+                   blocked: list[tuple[float, float]]) -> float | None:
     """A start s [m] for an element of ``length`` that overlaps none of ``blocked``."""
     total = track.length_m
     for _ in range(20):
@@ -247,7 +247,8 @@ def _add_elements(track: Track, rng: np.random.Generator, p: GeneratorParams) ->
     base_blocked = [(-p.start_clear_m, p.start_clear_m)]
     for x in track.intersections:
         for a in (x.s1_m, x.s2_m):
-            base_blocked.append((a - rules.INTERSECTION_APPROACH_M, a + rules.INTERSECTION_APPROACH_M))
+            reach = rules.INTERSECTION_APPROACH_M
+            base_blocked.append((a - reach, a + reach))
     lines = (Line.LEFT, Line.CENTRE, Line.RIGHT)
     gaps: list[Gap] = []
     for _ in range(int(rng.poisson(p.gap_rate_max_per_m * p.difficulty * total))):

@@ -3,7 +3,7 @@
 The mat is cut into square cells; each cell lists the segments that pass within
 ``reach`` of it. A query projects the point exactly onto the few segments of its cell,
 so its cost does not grow with the track's length. Points farther than ``reach`` from
-the road fall back to all segments (still exact, just slower).
+the road (or in an empty cell) fall back to all segments: still exact, just slower.
 """
 
 from __future__ import annotations
@@ -73,8 +73,10 @@ def build_index(table: SegmentTable, half_road_m: float, cell_m: float = CELL_M)
     jj = (cj[:, None, None] + offsets[None, None, :]).repeat(len(offsets), axis=1)
     cx_lo = gx0 + ii * cell_m
     cy_lo = gy0 + jj * cell_m
-    dx = np.maximum(0.0, np.maximum(cx_lo - xs_a[:, None, None], xs_a[:, None, None] - cx_lo - cell_m))
-    dy = np.maximum(0.0, np.maximum(cy_lo - ys_a[:, None, None], ys_a[:, None, None] - cy_lo - cell_m))
+    sx = xs_a[:, None, None]
+    sy = ys_a[:, None, None]
+    dx = np.maximum(0.0, np.maximum(cx_lo - sx, sx - cx_lo - cell_m))
+    dy = np.maximum(0.0, np.maximum(cy_lo - sy, sy - cy_lo - cell_m))
     near = (dx * dx + dy * dy <= reach * reach) & (ii >= 0) & (ii < nx) & (jj >= 0) & (jj < ny)
     cells = (jj * nx + ii)[near]
     seg_ids = np.broadcast_to(seg_a[:, None, None], near.shape)[near]
@@ -141,6 +143,15 @@ def locate_point(
                 near = (dist, s, d)
     if near[0] <= half_road:
         return near[1], near[2], near[0]
+    if not use_all and best[0] > half_road + EXTRA_REACH_M:
+        # Beyond the guaranteed reach a segment outside this cell may be nearer.
+        for j in range(len(length)):
+            u, d, dist = project(x0[j], y0[j], h0[j], kappa[j], 0.0, length[j], px, py)
+            if dist < best[0]:
+                s = s0[j] + u
+                if closed and s >= total:
+                    s -= total
+                best = (dist, s, d)
     return best[1], best[2], best[0]
 
 

@@ -259,7 +259,8 @@ def _raster_kernel(
                 if not arc:
                     # u and d are linear in x along a row: clip the row to the chunk's band.
                     dy = py - y0[j]
-                    for coef, base, lo_v, hi_v in ((ch, dy * sh, ua, ub), (-sh, dy * ch, -pad, pad)):
+                    bands = ((ch, dy * sh, ua, ub), (-sh, dy * ch, -pad, pad))
+                    for coef, base, lo_v, hi_v in bands:
                         # value(px) = coef * (px - x0) + base must lie in [lo_v, hi_v]
                         if abs(coef) < 1e-12:
                             if base < lo_v or base > hi_v:

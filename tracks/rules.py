@@ -7,6 +7,7 @@ here and documented so that a user can see exactly what is checked.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -233,7 +234,10 @@ def _check_overlap(track: Track) -> list[Violation]:
     hits = _close_approaches(samples, t.x0, t.y0, t.h0, t.kappa, t.length, t.s0, total,
                              track.closed, exclude, clearance)
     zone = clearance + 0.01
+    # One violation per stretch of close approach: (s_i, s_j, distance) at its closest,
+    # and the last (s_i, s_j) seen, to tell whether the next hit continues the stretch.
     regions: list[tuple[float, float, float]] = []
+    last = (-math.inf, -math.inf)
     for si, sj, dist in hits:
         if si > sj:
             continue  # each pair is seen from both sides
@@ -243,10 +247,11 @@ def _check_overlap(track: Track) -> list[Violation]:
             for x in track.intersections for a, b in ((x.s1_m, x.s2_m), (x.s2_m, x.s1_m)))
         if exempt:
             continue
-        if regions and si - regions[-1][0] < 0.5 + OVERLAP_SAMPLE_STEP_M and abs(
-                sj - regions[-1][1]) < 1.0:
+        continues = si - last[0] <= 2.5 * OVERLAP_SAMPLE_STEP_M and abs(sj - last[1]) < 1.0
+        last = (si, sj)
+        if continues:
             if dist < regions[-1][2]:
-                regions[-1] = (regions[-1][0], sj, dist)
+                regions[-1] = (si, sj, dist)
             continue
         regions.append((si, sj, dist))
     return [
@@ -323,15 +328,18 @@ def _check_gaps(track: Track) -> list[Violation]:
     events.sort(key=lambda e: (e[0], e[1]))
     open_lines: dict[object, int] = {}
     since: dict[object, float] = {}
+    joined: dict[object, int] = {}  # gaps that make up the current missing stretch
     reported: set[tuple[str, int]] = set()
     for s, step, line in events:
         before = open_lines.get(line, 0)
         open_lines[line] = before + step
-        if step > 0 and before == 0:
-            since[line] = s
-        if step < 0 and open_lines[line] == 0:
+        if step > 0:
+            joined[line] = 1 if before == 0 else joined[line] + 1
+            if before == 0:
+                since[line] = s
+        if step < 0 and open_lines[line] == 0 and joined[line] > 1:
             run = s - since[line]
-            key = ("merged", round(since[line] % total, 3) if track.closed else round(since[line], 3))
+            key = ("merged", round(since[line] % total if track.closed else since[line], 3))
             if run > MAX_MARKING_GAP_M + 1e-9 and key not in reported and 0 <= since[line] < total:
                 reported.add(key)
                 out.append(Violation(
@@ -399,7 +407,7 @@ def _check_obstacles(track: Track) -> list[Violation]:
                     out.append(Violation("obstacle_intersection", where,
                                          "obstacle stands in an intersection", ob.s_m))
     order = sorted(range(len(track.obstacles)), key=lambda i: track.obstacles[i].s_m)
-    pairs = list(zip(order, order[1:]))
+    pairs = list(itertools.pairwise(order))
     if track.closed and len(order) > 1:
         pairs.append((order[-1], order[0]))
     for a, b in pairs:

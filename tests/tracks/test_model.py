@@ -1,0 +1,135 @@
+"""Geometry of the track model: forward queries, joins, reverse query."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from tests.conftest import generated
+from tracks import Arc, Lane, Pose, Straight, Track
+from tracks.geometry import project
+
+segment = st.one_of(
+    st.builds(Straight, st.floats(0.05, 6.0)),
+    st.builds(Arc, st.floats(1.41, 12.0),
+              st.floats(0.02, 3.0).flatmap(lambda a: st.sampled_from([a, -a]))),
+)
+chains = st.builds(
+    lambda segs, x, y, h: Track(tuple(segs), closed=False, start=Pose(x, y, h)),
+    st.lists(segment, min_size=1, max_size=8),
+    st.floats(-20, 20), st.floats(-20, 20), st.floats(-math.pi, math.pi),
+)
+
+
+@settings(max_examples=150, deadline=None)
+@given(chains)
+def test_position_and_heading_are_continuous_at_joins(track: Track) -> None:
+    for s_join in track.table.s0[1:]:
+        before = track.pose(s_join - 1e-7)
+        after = track.pose(s_join + 1e-7)
+        assert math.hypot(before[0] - after[0], before[1] - after[1]) < 1e-6
+        assert abs(math.remainder(float(before[2] - after[2]), 2 * math.pi)) < 1e-6
+
+
+@settings(max_examples=150, deadline=None)
+@given(chains, st.floats(0.0, 1.0))
+def test_heading_is_the_derivative_of_position_and_curvature_of_heading(
+        track: Track, frac: float) -> None:
+    s = frac * track.length_m
+    h = 1e-5
+    lo, hi = max(0.0, s - h), min(track.length_m, s + h)
+    p0, p1 = track.position(lo), track.position(hi)
+    # Inside a segment the finite difference of position points along the heading.
+    idx = np.searchsorted(track.table.s0, [lo, hi], side="right")
+    if idx[0] == idx[1] and hi > lo:
+        tangent = (p1 - p0) / (hi - lo)
+        heading = float(track.heading(0.5 * (lo + hi)))
+        assert np.allclose(tangent, [math.cos(heading), math.sin(heading)], atol=1e-4)
+        dh = math.remainder(float(track.heading(hi) - track.heading(lo)), 2 * math.pi)
+        assert dh / (hi - lo) == pytest.approx(float(track.curvature(s)), abs=1e-4)
+
+
+@settings(max_examples=400, deadline=None)
+@given(st.integers(0, 60), st.floats(0.0, 1.0, exclude_max=True), st.floats(-0.409, 0.409))
+def test_reverse_query_inverts_forward_query(seed: int, frac: float, lateral: float) -> None:
+    track = generated(seed)
+    s = frac * track.length_m
+    x, y, _ = track.pose(s, lateral)
+    loc = track.locate(float(x), float(y), s_hint_m=s)
+    ds = abs(loc.s_m - s)
+    assert min(ds, track.length_m - ds) < 1e-4  # 0.1 mm
+    assert loc.lateral_m == pytest.approx(lateral, abs=1e-4)
+    if abs(lateral) > 1e-9:  # exactly on the centre line either lane is right
+        assert loc.lane == (Lane.LEFT if lateral > 0 else Lane.RIGHT)
+
+
+@pytest.mark.parametrize("seed", range(0, 40, 3))
+def test_loops_close(seed: int) -> None:
+    dist, dh = generated(seed).closure_error()
+    assert dist < 1e-9 and dh < 1e-9
+
+
+def test_reverse_query_matches_brute_force_over_all_segments() -> None:
+    rng = np.random.default_rng(1)
+    for seed in range(10):
+        track = generated(seed)
+        t = track.table
+        s = rng.uniform(0, track.length_m, 300)
+        pts = track.position(s, rng.uniform(-1.2, 1.2, 300))
+        _, _, dist_fast = track.locate_many(pts)
+        for i, (px, py) in enumerate(pts):
+            brute = min(project(t.x0[j], t.y0[j], t.h0[j], t.kappa[j], 0.0, t.length[j], px, py)[2]
+                        for j in range(len(t.length)))
+            assert dist_fast[i] == pytest.approx(brute, abs=1e-12)
+
+
+def test_far_point_falls_back_to_exact_answer() -> None:
+    track = Track((Straight(10.0),), closed=False)
+    loc = track.locate(4.0, 7.5)
+    assert loc.s_m == pytest.approx(4.0)
+    assert loc.lateral_m == pytest.approx(7.5)
+    assert loc.lane is Lane.OFF_ROAD
+
+
+def test_hint_picks_the_branch_at_a_crossing(eight: Track) -> None:
+    x = eight.intersections[0]
+    p = eight.position(x.s1_m + 0.05, -0.2)
+    on_first = eight.locate(float(p[0]), float(p[1]), s_hint_m=x.s1_m)
+    on_second = eight.locate(float(p[0]), float(p[1]), s_hint_m=x.s2_m)
+    assert on_first.s_m == pytest.approx(x.s1_m + 0.05, abs=1e-9)
+    assert on_first.lateral_m == pytest.approx(-0.2, abs=1e-9)
+    # Seen from the other branch the same point lies 5 cm along and 20 cm across it.
+    assert abs(on_second.s_m - x.s2_m) < 0.25
+    assert abs(on_second.lateral_m) == pytest.approx(0.05, abs=1e-9)
+
+
+def test_open_track_refuses_arc_length_outside() -> None:
+    track = Track((Straight(2.0),), closed=False)
+    with pytest.raises(ValueError, match="outside the open track"):
+        track.position(2.5)
+    closed = generated(0)
+    assert np.allclose(closed.position(closed.length_m + 1.0), closed.position(1.0))
+
+
+@pytest.mark.parametrize(("segments", "match"), [
+    ((), "at least one segment"),
+    ((Straight(-1.0),), r"segments\[0\].length_m"),
+    ((Arc(0.0, 1.0),), r"segments\[0\].radius_m"),
+    ((Arc(2.0, 7.0),), r"segments\[0\].angle_rad"),
+    ((Straight(float("nan")),), r"segments\[0\].length_m"),
+])
+def test_constructor_rejects_meaningless_geometry(segments: tuple, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        Track(segments)
+
+
+def test_locate_rejects_nan_and_bad_shapes() -> None:
+    track = generated(0)
+    with pytest.raises(ValueError, match="finite"):
+        track.locate(math.nan, 0.0)
+    with pytest.raises(ValueError, match=r"\(N, 2\)"):
+        track.locate_many(np.zeros((3, 3)))

@@ -1,0 +1,104 @@
+"""Rasterised marking and label maps."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from tracks import VIRTUAL, Gap, Line, Marking, Pose, Straight, Track, load_named, rasterize
+from tracks.rules import LINE_WIDTH_M
+
+
+def strip(heading: float = 0.0, **kw) -> Track:
+    return Track((Straight(4.0),), closed=False, start=Pose(0.0, 0.0, heading), **kw)
+
+
+def value_at(m, track: Track, s: float, lateral: float) -> tuple[int, int]:
+    col, row = np.rint(m.world_to_pixel(track.position(s, lateral))).astype(int)
+    return int(m.intensity[row, col]), int(m.labels[row, col])
+
+
+def test_default_resolution_is_at_most_4_mm() -> None:
+    assert rasterize(strip()).resolution_m <= 0.004
+
+
+def test_lines_sit_where_the_model_puts_them() -> None:
+    track = strip(0.3)
+    m = rasterize(track)
+    assert value_at(m, track, 1.0, -0.4) == (255, Marking.RIGHT_LINE)
+    assert value_at(m, track, 1.0, 0.4) == (255, Marking.LEFT_LINE)
+    assert value_at(m, track, 1.0, -0.2) == (0, Marking.NONE)  # asphalt
+    assert value_at(m, track, 1.0, -0.45) == (0, Marking.NONE)  # beyond the road
+    assert value_at(m, track, 0.1, 0.0) == (255, Marking.CENTRE_LINE)  # first dash
+    assert value_at(m, track, 0.3, 0.0) == (0, Marking.CENTRE_LINE | VIRTUAL)  # dash gap
+
+
+def test_painted_area_is_conserved_by_anti_aliasing() -> None:
+    track = strip(0.37)  # an oblique strip: every line edge is anti-aliased
+    m = rasterize(track)
+    painted = m.intensity.astype(np.float64).sum() / 255.0 * m.resolution_m**2
+    expected = LINE_WIDTH_M * track.length_m * (2 + 0.5)  # two solid lines, half a dashed one
+    assert painted == pytest.approx(expected, rel=0.01)
+    edge = (m.intensity > 0) & (m.intensity < 255)
+    assert edge.sum() > 0.3 * (m.intensity == 255).sum()
+
+
+def test_gap_leaves_a_virtual_line() -> None:
+    track = strip(gaps=(Gap(Line.LEFT, 1.0, 0.8),))
+    m = rasterize(track)
+    assert value_at(m, track, 1.4, 0.4) == (0, Marking.LEFT_LINE | VIRTUAL)
+    assert value_at(m, track, 2.2, 0.4) == (255, Marking.LEFT_LINE)
+
+
+def test_start_line_across_the_road() -> None:
+    oval = load_named("oval")
+    m = rasterize(oval)
+    for lateral in (-0.3, -0.1, 0.1, 0.3):
+        assert value_at(m, oval, 0.0, lateral) == (255, Marking.START_LINE)
+    assert value_at(m, oval, 0.06, -0.2)[0] == 0
+
+
+def test_intersection_has_stop_lines_and_no_lines_inside() -> None:
+    eight = load_named("figure-eight")
+    m = rasterize(eight)
+    x = eight.intersections[0]
+    half = eight.half_road_m
+    for s in (x.s1_m, x.s2_m):
+        for lateral in (-0.4, 0.0, 0.4):
+            assert value_at(m, eight, s + 0.1, lateral)[0] == 0  # inside the crossing
+        assert value_at(m, eight, s - half - 0.02, -0.2) == (255, Marking.STOP_LINE)
+        assert value_at(m, eight, s + half + 0.02, 0.2) == (255, Marking.STOP_LINE)
+        assert value_at(m, eight, s - half - 0.02, 0.2)[1] != Marking.STOP_LINE
+        assert value_at(m, eight, s - half - 0.3, -0.4) == (255, Marking.RIGHT_LINE)
+
+
+def test_pixel_world_round_trip() -> None:
+    m = rasterize(strip())
+    pts = np.array([[0.5, 0.1], [3.2, -0.33]])
+    assert np.allclose(m.pixel_to_world(m.world_to_pixel(pts)), pts)
+
+
+def test_curves_are_painted_continuously() -> None:
+    curve = load_named("left-curve")
+    m = rasterize(curve)
+    s = np.linspace(0.05, curve.length_m - 0.05, 400)
+    for lateral, label in ((-0.4, Marking.RIGHT_LINE), (0.4, Marking.LEFT_LINE)):
+        cols, rows = np.rint(m.world_to_pixel(curve.position(s, lateral))).astype(int).T
+        assert np.all(m.intensity[rows, cols] > 200)
+        assert np.all(m.labels[rows, cols] == label)
+
+
+def test_bad_resolution() -> None:
+    with pytest.raises(ValueError, match="resolution_m"):
+        rasterize(strip(), resolution_m=0.0)
+    with pytest.raises(ValueError, match="too large"):
+        rasterize(replace(strip(), segments=(Straight(4000.0),)), resolution_m=0.0001)
+
+
+def test_map_is_deterministic() -> None:
+    a, b = rasterize(load_named("figure-eight")), rasterize(load_named("figure-eight"))
+    assert np.array_equal(a.intensity, b.intensity) and np.array_equal(a.labels, b.labels)
+    assert math.isclose(a.origin_m[0], b.origin_m[0])

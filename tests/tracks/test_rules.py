@@ -1,0 +1,136 @@
+"""The rule checker: each rule can fail, and every violation is reported."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import pytest
+
+from tests.conftest import generated
+from tracks import (
+    Arc,
+    Gap,
+    Intersection,
+    Lane,
+    Line,
+    Obstacle,
+    Straight,
+    Track,
+    load_named,
+    validate,
+)
+from tracks.rules import min_centre_radius_m, min_road_clearance_m
+
+
+def rules_of(track: Track) -> list[str]:
+    return [v.rule for v in validate(track)]
+
+
+def test_min_centre_radius_follows_from_the_inner_edge_rule() -> None:
+    assert min_centre_radius_m() == pytest.approx(1.41)
+    assert min_road_clearance_m() == pytest.approx(0.87)
+
+
+@pytest.mark.parametrize("name", ["straight", "left-curve", "thesis", "oval", "figure-eight"])
+def test_named_tracks_are_valid(name: str) -> None:
+    assert validate(load_named(name)) == []
+
+
+def test_tight_curve_is_reported_with_its_field() -> None:
+    track = Track((Straight(2.0), Arc(1.2, math.pi / 2), Straight(2.0)), closed=False)
+    (v,) = validate(track)
+    assert (v.rule, v.field) == ("min_radius", "segments[1].radius_m")
+    assert "1.200 m" in v.message and "1.410 m" in v.message
+
+
+def test_curve_at_exactly_the_minimum_radius_is_legal() -> None:
+    track = Track((Straight(1.0), Arc(1.41, math.pi / 2)), closed=False)
+    assert validate(track) == []
+
+
+def test_loop_that_does_not_close_is_reported() -> None:
+    oval = load_named("oval")
+    broken = replace(oval, segments=(*oval.segments[:-1], Straight(2.5 + 0.002)))
+    assert rules_of(broken) == ["closure"]
+    almost = replace(oval, segments=(*oval.segments[:-1], Straight(2.5 + 0.0005)))
+    assert rules_of(almost) == []  # 0.5 mm is within the 1 mm tolerance
+
+
+def test_crossing_without_declared_intersection_is_an_overlap() -> None:
+    eight = load_named("figure-eight")
+    violations = validate(replace(eight, intersections=()))
+    assert {v.rule for v in violations} == {"overlap"}
+    x = eight.intersections[0]
+    assert any(abs(v.s_m - x.s1_m) < 1.0 for v in violations)
+
+
+def test_parallel_roads_closer_than_the_rules_allow() -> None:
+    r = 1.41
+    # A spiral that comes back 0.5 m beside its own first straight.
+    spiral = Track((Straight(5.0), Arc(r, math.pi / 2), Straight(0.5), Arc(r, math.pi / 2),
+                    Straight(2.0), Arc(r, math.pi / 2), Arc(r, math.pi / 2), Straight(1.0)),
+                   closed=False)
+    violations = validate(spiral)
+    assert [v.rule for v in violations] == ["overlap"]
+    assert "0.500 m" in violations[0].message
+    # The same spiral 1.0 m apart keeps the 50 mm gap between the roads' edges.
+    wider = replace(spiral, segments=(*spiral.segments[:2], Straight(1.0), *spiral.segments[3:]))
+    assert validate(wider) == []
+
+
+def test_gap_longer_than_a_metre() -> None:
+    strip = load_named("straight")
+    assert rules_of(replace(strip, gaps=(Gap(Line.LEFT, 2.0, 1.0),))) == []
+    assert rules_of(replace(strip, gaps=(Gap(Line.LEFT, 2.0, 1.2),))) == ["gap_length"]
+    # Two touching gaps of one line make one long missing stretch.
+    two = (Gap(Line.LEFT, 2.0, 0.8), Gap(Line.LEFT, 2.7, 0.8))
+    assert rules_of(replace(strip, gaps=two)) == ["gap_length"]
+
+
+def test_at_most_two_lines_missing_at_once() -> None:
+    strip = load_named("straight")
+    two = (Gap(Line.LEFT, 2.0, 0.8), Gap(Line.RIGHT, 2.2, 0.8))
+    assert rules_of(replace(strip, gaps=two)) == []
+    three = (*two, Gap(Line.CENTRE, 2.5, 0.5))
+    assert rules_of(replace(strip, gaps=three)) == ["lines_missing"]
+
+
+def test_obstacle_rules() -> None:
+    strip = load_named("straight")
+    ok = Obstacle(3.0, Lane.RIGHT, 0.2, 0.3, 0.15)
+    assert rules_of(replace(strip, obstacles=(ok,))) == []
+    too_wide = replace(ok, width_m=0.5)
+    assert "obstacle_size" in rules_of(replace(strip, obstacles=(too_wide,)))
+    too_high = replace(ok, height_m=0.3)
+    assert rules_of(replace(strip, obstacles=(too_high,))) == ["obstacle_size"]
+    into_other_lane = replace(ok, offset_m=0.15)
+    assert rules_of(replace(strip, obstacles=(into_other_lane,))) == ["obstacle_blocks"]
+    close_pair = (ok, replace(ok, s_m=3.9, lane=Lane.LEFT))
+    assert rules_of(replace(strip, obstacles=close_pair)) == ["obstacle_spacing"]
+
+
+def test_intersection_must_be_a_real_right_angled_crossing() -> None:
+    oval = load_named("oval")
+    bogus = replace(oval, intersections=(Intersection(1.0, 6.0),))
+    rules = rules_of(bogus)
+    assert "intersection_position" in rules
+    assert "intersection_approach" in rules  # s = 6 m lies in a curve
+
+
+def test_every_violation_is_reported_not_just_the_first() -> None:
+    oval = load_named("oval")
+    bad = replace(
+        oval,
+        segments=(oval.segments[0], Arc(1.0, math.pi), *oval.segments[2:]),
+        gaps=(Gap(Line.LEFT, 5.0, 1.5),),
+        obstacles=(Obstacle(6.0, Lane.RIGHT, 0.2, 0.6, 0.15),),
+        start_line_s_m=None,
+    )
+    rules = set(rules_of(bad))
+    assert {"min_radius", "closure", "gap_length", "obstacle_size", "start_line"} <= rules
+
+
+def test_generated_tracks_pass_every_rule() -> None:
+    for seed in range(30):
+        assert validate(generated(seed)) == []
