@@ -105,7 +105,7 @@ def _dash_integral(x: float, dash: float, period: float) -> float:
 
 @njit(cache=True)
 def _paint_pixel(
-    cov: np.ndarray,
+    intensity: np.ndarray,
     labels: np.ndarray,
     r: int,
     q: int,
@@ -170,10 +170,12 @@ def _paint_pixel(
     if stop > best_paint:
         best_paint = stop
         best_label = 5
-    before = cov[r, q]
-    if best_paint > before:
-        cov[r, q] = min(1.0, best_paint)
-    if best_paint >= 0.5 and best_paint >= before:
+    # Pixels painted by two chunks (joins, crossings) keep the larger coverage.
+    value = int(min(1.0, best_paint) * 255.0 + 0.5)
+    before = intensity[r, q]
+    if value > before:
+        intensity[r, q] = value
+    if best_paint >= 0.5 and value >= before:
         labels[r, q] = best_label
     elif best_virtual >= 0.5 and labels[r, q] == 0:
         labels[r, q] = virtual_label | 0x80
@@ -186,7 +188,7 @@ def _near_line(d: float, lane_w: float, reach: float) -> bool:
 
 @njit(cache=True)
 def _raster_kernel(
-    cov: np.ndarray,
+    intensity: np.ndarray,
     labels: np.ndarray,
     ox: float,
     oy: float,
@@ -212,7 +214,7 @@ def _raster_kernel(
     stop_w: float,
     chunk_m: float,
 ) -> None:
-    n_rows, n_cols = cov.shape
+    n_rows, n_cols = intensity.shape
     half_road = lane_w + 0.5 * line_w
     pad = half_road + 2.0 * res
     line_reach = 0.5 * line_w + res
@@ -291,7 +293,7 @@ def _raster_kernel(
                     s = s0[j] + u
                     if closed and s >= total:
                         s -= total
-                    _paint_pixel(cov, labels, r, q, s, d, res, total, closed, lane_w, line_w,
+                    _paint_pixel(intensity, labels, r, q, s, d, res, total, closed, lane_w, line_w,
                                  dash, period, gap_line, gap_lo, gap_hi, passes, start_s,
                                  start_w, stop_w)
 
@@ -313,13 +315,13 @@ def rasterize(track: Track, resolution_m: float = DEFAULT_RESOLUTION_M,
     n_rows = int(math.ceil((ymax - ymin) / resolution_m))
     if n_cols * n_rows > 400_000_000:
         raise ValueError(f"a {n_cols}×{n_rows} map is too large; use a coarser resolution_m")
-    cov = np.zeros((n_rows, n_cols), dtype=np.float32)
+    intensity = np.zeros((n_rows, n_cols), dtype=np.uint8)
     labels = np.zeros((n_rows, n_cols), dtype=np.uint8)
     t = track.table
     gaps = track.gaps
     passes = np.array([s for x in track.intersections for s in (x.s1_m, x.s2_m)], dtype=np.float64)
     _raster_kernel(
-        cov, labels, xmin, ymax, resolution_m,
+        intensity, labels, xmin, ymax, resolution_m,
         t.x0, t.y0, t.h0, t.kappa, t.length, t.s0, track.length_m, track.closed,
         track.lane_width_m, rules.LINE_WIDTH_M, rules.CENTRE_DASH_M,
         rules.CENTRE_DASH_M + rules.CENTRE_DASH_GAP_M,
@@ -330,5 +332,4 @@ def rasterize(track: Track, resolution_m: float = DEFAULT_RESOLUTION_M,
         math.nan if track.start_line_s_m is None else float(track.start_line_s_m),
         rules.START_LINE_WIDTH_M, rules.STOP_LINE_WIDTH_M, CHUNK_M,
     )
-    intensity = np.rint(cov * 255.0).astype(np.uint8)
     return MarkingMap(intensity, labels, (xmin, ymax), float(resolution_m))
