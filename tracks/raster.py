@@ -48,6 +48,8 @@ class Marking(IntEnum):
     LEFT_LINE = 3
     START_LINE = 4
     STOP_LINE = 5
+    OBSTACLE = 6
+    """Only in camera ground truth: a carton hiding what lies behind it."""
 
 
 @dataclass(frozen=True)
