@@ -76,8 +76,8 @@ def _pyramid(m: MarkingMap, min_size: int = 8) -> tuple[np.ndarray, np.ndarray, 
     return np.concatenate([lv.ravel() for lv in levels]), offsets, shapes, res
 
 
-def _blobs(rng: np.random.Generator, shape: tuple[int, int], count: int, radius_px: tuple[float, float]
-           ) -> np.ndarray:
+def _blobs(rng: np.random.Generator, shape: tuple[int, int], count: int,
+           radius_px: tuple[float, float]) -> np.ndarray:
     """Sum of ``count`` soft elliptical blobs (peak 1) at random places."""
     out = np.zeros(shape, np.float32)
     for _ in range(count):

@@ -103,7 +103,7 @@ def frame_truth(track: Track, camera: FisheyeCamera, pose: tuple[float, float, f
         cam_pts = camera.world_to_camera(points, pose)
         return camera.project(cam_pts), cam_pts[:, 2] > 0.05
 
-    s, edges, painted = _line_samples(track)
+    _, edges, painted = _line_samples(track)
     for li, mark in enumerate((Marking.RIGHT_LINE, Marking.CENTRE_LINE, Marking.LEFT_LINE)):
         near = np.hypot(*(edges[li, 0, :, :2] - cam_xy).T) < TRUTH_RANGE_M
         keep = near & painted[li]
