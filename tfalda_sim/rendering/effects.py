@@ -2,7 +2,9 @@
 
 Grey levels are in digital numbers (DN, 0–255) of the 8-bit sensor before gain. Defaults
 are read off ``shared/reference/*.png``: dark mat (≈ 35 DN), lines ≈ 210 DN, brighter
-walls, a dark bonnet with faint line reflections, vignetting toward the corners.
+walls, a dark bonnet with faint line reflections, vignetting toward the corners, floor
+sheen near the horizon. Shadows, glare spots, wear and motion blur are off by default and
+drawn by ``DomainRandomization``.
 """
 
 from __future__ import annotations
@@ -20,9 +22,7 @@ class Effects:
     """Grey level of the black mat [DN]."""
     line_dn: float = 210.0
     """Grey level of fresh white paint [DN]."""
-    floor_dn: float = 55.0
-    """Hall floor beyond the mat [DN]."""
-    wall_dn: float = 120.0
+    wall_dn: float = 100.0
     """Mean grey level of the walls above the horizon [DN]."""
     gain: float = 1.0
     """Exposure × analogue gain [-]: 1 nominal, < 1 under-, > 1 overexposed."""
@@ -30,9 +30,9 @@ class Effects:
     """Brightness lost in the image corners [-] (cos⁴-like falloff; 0 = none)."""
     noise_dn: float = 2.0
     """Standard deviation of the sensor's Gaussian read noise [DN]."""
-    glare: float = 25.0
+    glare: float = 20.0
     """Floor sheen at grazing view angles, strongest near the horizon [DN]."""
-    glare_spots: int = 3
+    glare_spots: int = 0
     """Number of bright reflections of ceiling lights lying on the mat [-]."""
     glare_spot_dn: float = 60.0
     """Peak brightness added by one glare spot [DN]."""
@@ -72,7 +72,6 @@ class DomainRandomization:
 
     mat_dn: tuple[float, float] = (20.0, 55.0)
     line_dn: tuple[float, float] = (150.0, 240.0)
-    floor_dn: tuple[float, float] = (35.0, 90.0)
     wall_dn: tuple[float, float] = (70.0, 180.0)
     gain: tuple[float, float] = (0.6, 1.5)
     vignetting: tuple[float, float] = (0.1, 0.55)

@@ -1,15 +1,20 @@
 """The camera image: per-pixel inverse mapping onto the ground, footprint-filtered.
 
-The ground is flat and the camera is rigid on the car, so every pixel's ray, its ground
-hit in the car frame and its footprint on the ground are fixed: ``PixelGeometry``
-computes them once per camera. A frame then costs, per pixel, a 2-D rigid transform and
-one bilinear fetch from the mip level that matches the pixel's footprint (no shimmer,
-far dashes fade instead of vanishing). Rays that reach a wall first show the hall's wall
-texture, with parallax.
+The ground is flat and the camera rigid on the car, so every pixel's ray, its ground hit
+in the car frame, its footprint on the ground and therefore its mip level are constants,
+computed once (``PixelGeometry``). Per frame and pixel:
 
-Any set of windows can be rendered on its own (perception reads only its ROIs): every
-stage, noise included, depends only on the pixel and the frame, so a window equals the
-same crop of the full frame bit for bit.
+1. *maps* (numba, vectorised): the ground hit moved to the world by the car pose and
+   turned into a texel coordinate of the pixel's own mip level inside the mip atlas;
+2. *ground*: one ``cv2.remap`` (bilinear, SIMD) of the atlas for all ground pixels: far
+   dashes are pre-filtered, so they fade instead of shimmering or vanishing;
+3. *walls*: one ``cv2.remap`` of the wall texture, shifted by the car's yaw;
+4. *combine* (numba, vectorised): floor sheen, shadows and glare, the bonnet with its
+   faint reflection, obstacles, exposure × vignetting, sensor noise, 8-bit rounding.
+
+Every step depends only on the pixel and the frame (the noise is read from a fixed bank
+at a per-frame offset), so any window rendered alone equals the same crop of the full
+frame bit for bit — perception renders only its ROIs.
 """
 
 from __future__ import annotations
@@ -23,16 +28,21 @@ from numba import njit
 
 from ..camera import FisheyeCamera
 from .effects import Effects
-from .scene import LIGHT_RES_M, WALL_TEXEL_M, Scene
-
-MAX_GROUND_RANGE_M: float = 40.0
-"""Ground hits farther than this from the camera [m] are treated as reaching the walls."""
+from .scene import LIGHT_RES_M, WALL_TEXEL_M, Hall, Scene
 
 MOTION_BLUR_SAMPLES: int = 5
 """Sub-frame poses averaged for motion blur."""
 
 OBSTACLE_EDGE_STEPS: int = 12
 """Points per box edge when projecting an obstacle's faces (fisheye bends straight edges)."""
+
+CEILING_FACTOR: float = 1.25
+"""Ceiling brightness relative to ``Effects.wall_dn`` [-]."""
+
+NOISE_BANK_SIZE: int = 1 << 21
+"""Entries of the fixed table of standard-normal sensor noise (int8, 1/16 σ steps)."""
+
+_NOISE_SCALE = 1.0 / 16.0
 
 
 @dataclass(frozen=True)
@@ -52,18 +62,18 @@ class Bonnet:
 
 @dataclass(frozen=True)
 class PixelGeometry:
-    """Per-pixel constants of a camera on the car, all ``(height, width)`` float32."""
+    """Per-pixel constants of a camera on the car, ``(height, width)`` arrays. On the
+    bonnet they describe the mirrored pixel (the reflection)."""
 
-    gx: np.ndarray  # ground hit, car frame x [m] (NaN: the ray does not reach the ground)
+    gx: np.ndarray  # ground hit, car frame x [m] (0 where the ray does not go down)
     gy: np.ndarray  # ground hit, car frame y [m]
     rho: np.ndarray  # horizontal distance camera → ground hit [m] (inf: no hit)
-    dx: np.ndarray  # horizontal direction of the ray, car frame (unit)
-    dy: np.ndarray
+    azimuth: np.ndarray  # ray azimuth in the car frame [rad], left positive
     tan_el: np.ndarray  # rise of the ray per metre of horizontal travel [-]
     log2_fp: np.ndarray  # log2 of the pixel's footprint on the ground [log2 m]
-    radius2: np.ndarray  # squared distance from the image centre, 1 at the corners [-]
-    sheen: np.ndarray  # floor sheen weight (grazing view) [-]
-    bonnet: np.ndarray  # uint8: 1 where the bonnet is (geometry there is the mirror's)
+    radius2: np.ndarray  # squared distance from the image centre, 1 in the corners [-]
+    sheen: np.ndarray  # floor sheen weight, largest at grazing view [-]
+    bonnet: np.ndarray  # uint8: 1 on the bonnet
 
 
 def pixel_geometry(camera: FisheyeCamera, bonnet: Bonnet | None = None) -> PixelGeometry:
@@ -73,193 +83,177 @@ def pixel_geometry(camera: FisheyeCamera, bonnet: Bonnet | None = None) -> Pixel
     pos = camera.mount.position()
     rot = camera.mount.rotation()
 
-    def ground(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, ...]:
+    def ground(u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         rays = camera.unproject(np.column_stack([u.ravel(), v.ravel()])) @ rot
-        down = rays[:, 2] < -1e-9
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(down, -pos[2] / rays[:, 2], np.nan)
+            t = np.where(rays[:, 2] < -1e-9, -pos[2] / rays[:, 2], np.nan)
         return rays, pos[0] + t * rays[:, 0], pos[1] + t * rays[:, 1]
 
     v, u = np.mgrid[0:h, 0:w].astype(np.float64)
-    if bonnet.enabled:
-        edge = bonnet.edge(u, w)
-        on_bonnet = v >= edge
-        v_geo = np.where(on_bonnet, 2.0 * edge - v, v)  # mirrored about the bonnet's edge
-    else:
-        on_bonnet = np.zeros_like(v, dtype=bool)
-        v_geo = v
+    on_bonnet = (v >= bonnet.edge(u, w)) if bonnet.enabled else np.zeros_like(v, dtype=bool)
+    v_geo = np.where(on_bonnet, 2.0 * bonnet.edge(u, w) - v, v)  # mirrored about the edge
     rays, gx, gy = ground(u, v_geo)
     horiz = np.hypot(rays[:, 0], rays[:, 1])
     rho = np.hypot(gx - pos[0], gy - pos[1])
-    rho = np.where(np.isfinite(rho) & (rho <= MAX_GROUND_RANGE_M), rho, np.inf)
+    rho = np.where(np.isfinite(rho), rho, np.inf)
     # Footprint: geometric mean of the ground steps to the neighbouring half-pixels.
     _, ax, ay = ground(u + 0.5, v_geo)
     _, bx, by = ground(u - 0.5, v_geo)
     _, cx, cy = ground(u, v_geo + 0.5)
     _, ex, ey = ground(u, v_geo - 0.5)
     fp = np.sqrt(np.hypot(ax - bx, ay - by) * np.hypot(cx - ex, cy - ey))
-    log2_fp = np.where(np.isfinite(fp) & (fp > 0), np.log2(np.where(fp > 0, fp, 1.0)), 30.0)
+    ok = np.isfinite(fp) & (fp > 0)
+    log2_fp = np.where(ok, np.log2(np.where(ok, fp, 1.0)), 30.0)
     cu, cv_ = (w - 1) / 2, (h - 1) / 2
     radius2 = ((u - cu) ** 2 + (v - cv_) ** 2) / (cu**2 + cv_**2)
-    # Sheen: a specular floor is brightest where it is seen at grazing angles.
-    with np.errstate(invalid="ignore", divide="ignore"):
-        elev = np.arctan2(-rays[:, 2], horiz).reshape(h, w)
-    sheen = np.where(np.isfinite(rho.reshape(h, w)), np.exp(-elev / 0.08), 0.0)
+    depression = np.arctan2(-rays[:, 2], horiz)
+    sheen = np.where(np.isfinite(rho), np.exp(-np.maximum(depression, 0.0) / 0.08), 0.0)
     f32 = np.float32
+    shape = (h, w)
     return PixelGeometry(
-        gx=gx.reshape(h, w).astype(f32), gy=gy.reshape(h, w).astype(f32),
-        rho=rho.reshape(h, w).astype(f32),
-        dx=(rays[:, 0] / np.maximum(horiz, 1e-12)).reshape(h, w).astype(f32),
-        dy=(rays[:, 1] / np.maximum(horiz, 1e-12)).reshape(h, w).astype(f32),
-        tan_el=(rays[:, 2] / np.maximum(horiz, 1e-12)).reshape(h, w).astype(f32),
-        log2_fp=log2_fp.reshape(h, w).astype(f32), radius2=radius2.astype(f32),
-        sheen=sheen.astype(f32), bonnet=on_bonnet.astype(np.uint8),
+        gx=np.nan_to_num(gx).reshape(shape).astype(f32),
+        gy=np.nan_to_num(gy).reshape(shape).astype(f32),
+        rho=rho.reshape(shape).astype(f32),
+        azimuth=np.arctan2(rays[:, 1], rays[:, 0]).reshape(shape).astype(f32),
+        tan_el=(rays[:, 2] / np.maximum(horiz, 1e-12)).reshape(shape).astype(f32),
+        log2_fp=log2_fp.reshape(shape).astype(f32), radius2=radius2.astype(f32),
+        sheen=sheen.reshape(shape).astype(f32), bonnet=on_bonnet.astype(np.uint8),
     )
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _ground(wx: float, wy: float, level: int, pyramid: np.ndarray, offsets: np.ndarray,
-            shapes: np.ndarray, res: np.ndarray, ox: float, oy: float, light: np.ndarray,
-            mat: float, line: float, floor: float) -> float:
-    inv0 = res[1]  # 1 / (level-0 texel size): see Renderer._levels
-    fx = (wx - ox) * inv0
-    fy = (oy - wy) * inv0
-    if fx < 0.0 or fy < 0.0 or fy >= shapes[0, 0] or fx >= shapes[0, 1]:
-        return floor
-    scale = res[2 + level]  # 2^-level
-    col = fx * scale + 0.5  # +1 texel so truncation is floor; undone below
-    row = fy * scale + 0.5
-    n_rows = shapes[level, 0]
-    n_cols = shapes[level, 1]
-    c0 = int(col)
-    r0i = int(row)
-    tc = col - c0
-    tr = row - r0i
-    c0 -= 1
-    r0i -= 1
-    c1 = min(c0 + 1, n_cols - 1)
-    c0 = max(c0, 0)
-    r1 = min(r0i + 1, n_rows - 1)
-    r0i = max(r0i, 0)
-    base = offsets[level]
-    a = pyramid[base + r0i * n_cols + c0]
-    b = pyramid[base + r0i * n_cols + c1]
-    c = pyramid[base + r1 * n_cols + c0]
-    d = pyramid[base + r1 * n_cols + c1]
-    m = ((a * (1.0 - tc) + b * tc) * (1.0 - tr) + (c * (1.0 - tc) + d * tc) * tr) * (1.0 / 255.0)
-    li = min(int(fy * res[0]), light.shape[0] - 1)  # res[0]: light texels per map texel
-    lj = min(int(fx * res[0]), light.shape[1] - 1)
-    paint = m * (1.0 - light[li, lj, 2])
-    return (mat + (line - mat) * paint) * light[li, lj, 0] + light[li, lj, 1]
-
-
-@njit(cache=True, inline="always", error_model="numpy")
-def _noise(seed: np.uint64, index: int) -> float:
-    """Approximately standard-normal value for (frame seed, pixel): splitmix64 hash, the
-    sum of four 16-bit uniforms (Irwin–Hall), rescaled to unit variance."""
-    z = seed + np.uint64(index) * np.uint64(0x9E3779B97F4A7C15)
-    z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    z = z ^ (z >> np.uint64(31))
-    mask = np.uint64(0xFFFF)
-    total = float(z & mask) + float((z >> np.uint64(16)) & mask) + float(
-        (z >> np.uint64(32)) & mask) + float((z >> np.uint64(48)) & mask)
-    return (total / 65535.0 - 2.0) * 1.7320508075688772
+@njit(cache=True, error_model="numpy")
+def _ground_maps(maps: np.ndarray, light_maps: np.ndarray, r0: int, c0: int, gx: np.ndarray,
+                 gy: np.ndarray, scale: np.ndarray, bias_x: np.ndarray, bias_y: np.ndarray,
+                 affine: np.ndarray, size_x: float, size_y: float, light_scale: float,
+                 with_light: bool) -> None:
+    """Atlas coordinates of each pixel's ground hit (pixel centres at integers)."""
+    a00, a01, a02, a10, a11, a12 = (np.float32(affine[0]), np.float32(affine[1]),
+                                    np.float32(affine[2]), np.float32(affine[3]),
+                                    np.float32(affine[4]), np.float32(affine[5]))
+    lo = np.float32(-2.0)
+    hx = np.float32(size_x + 1.0)
+    hy = np.float32(size_y + 1.0)
+    ls = np.float32(light_scale)
+    width = maps.shape[1]
+    half = np.float32(0.5)
+    for i in range(maps.shape[0]):
+        gxr = gx[r0 + i, c0:c0 + width]
+        gyr = gy[r0 + i, c0:c0 + width]
+        sr = scale[r0 + i, c0:c0 + width]
+        bxr = bias_x[r0 + i, c0:c0 + width]
+        byr = bias_y[r0 + i, c0:c0 + width]
+        m = maps[i].reshape(2 * width)  # interleaved (x, y): contiguous stores
+        for j in range(width):
+            # Level-0 texel coordinates, clamped into the level's zero guard band.
+            x = min(max(a00 * gxr[j] + a01 * gyr[j] + a02, lo), hx)
+            y = min(max(a10 * gxr[j] + a11 * gyr[j] + a12, lo), hy)
+            m[2 * j] = x * sr[j] + bxr[j]
+            m[2 * j + 1] = y * sr[j] + byr[j]
+        if with_light:
+            lm = light_maps[i].reshape(2 * width)
+            for j in range(width):
+                lm[2 * j] = min(max(a00 * gxr[j] + a01 * gyr[j] + a02, lo), hx) * ls - half
+                lm[2 * j + 1] = min(max(a10 * gxr[j] + a11 * gyr[j] + a12, lo), hy) * ls - half
 
 
 @njit(cache=True, error_model="numpy")
-def _render_window(
-    out: np.ndarray, r_start: int, c_start: int,
-    gx: np.ndarray, gy: np.ndarray, rho: np.ndarray, dxa: np.ndarray, dya: np.ndarray,
-    tan_el: np.ndarray, levels: np.ndarray, gain_map: np.ndarray, sheen_map: np.ndarray,
-    bonnet: np.ndarray,
-    pyramid: np.ndarray, offsets: np.ndarray, shapes: np.ndarray, res: np.ndarray,
-    ox: float, oy: float, light: np.ndarray,
-    walls: np.ndarray, wall_h: float, wall_tex: np.ndarray,
-    car_x: float, car_y: float, car_yaw: float, cam_fwd: float, cam_lat: float, cam_h: float,
-    blur_m: float, fx: np.ndarray, seed: np.uint64,
-    overlay: np.ndarray, overlay_mask: np.ndarray, has_overlay: bool,
-) -> None:
-    mat, line, floor, wall_dn, noise_dn = fx[0], fx[1], fx[2], fx[3], fx[6]
-    bonnet_dn, refl = fx[8], fx[9]
-    c = math.cos(car_yaw)
-    s = math.sin(car_yaw)
-    cam_x = car_x + c * cam_fwd - s * cam_lat
-    cam_y = car_y + s * cam_fwd + c * cam_lat
-    xmin, ymin, xmax, ymax = walls[0], walls[1], walls[2], walls[3]
-    wall_w = xmax - xmin
-    wall_d = ymax - ymin
-    near_wall = min(cam_x - xmin, xmax - cam_x, cam_y - ymin, ymax - cam_y)
-    n_blur = 1 if blur_m <= 0.0 else 5
-    width = gx.shape[1]
-    wall_scale = wall_dn / 128.0
+def _shift_maps(out: np.ndarray, static: np.ndarray, r0: int, c0: int, shift: float) -> None:
+    """``out = static[r0:, c0:] + (shift, 0)`` for interleaved (x, y) maps."""
+    s = np.float32(shift)
+    width = out.shape[1]
     for i in range(out.shape[0]):
-        r = r_start + i
-        for j in range(out.shape[1]):
-            q = c_start + j
-            if has_overlay and overlay_mask[i, j]:
+        o = out[i].reshape(2 * width)
+        st = static[r0 + i].reshape(2 * static.shape[1])
+        for j in range(width):
+            o[2 * j] = st[2 * (c0 + j)] + s
+            o[2 * j + 1] = st[2 * (c0 + j) + 1]
+
+
+@njit(cache=True, error_model="numpy")
+def _combine(out: np.ndarray, r0: int, c0: int, cov: np.ndarray, wall: np.ndarray,
+             light: np.ndarray, with_light: bool, overlay: np.ndarray, overlay_mask: np.ndarray,
+             with_overlay: bool, flags: np.ndarray, gain: np.ndarray, sheen: np.ndarray,
+             noise: np.ndarray, noise_offset: int, image_width: int, params: np.ndarray) -> None:
+    """Final grey levels. ``flags``: 1 ground, 2 bonnet, 4 ceiling (wall texture skipped)."""
+    mat = np.float32(params[0])
+    k_line = np.float32((params[1] - params[0]) / 255.0)
+    wall_k = np.float32(params[2] / 128.0)
+    bonnet_dn = np.float32(params[3])
+    refl = np.float32(params[4])
+    sigma = np.float32(params[5] / 16.0)
+    ceiling = np.float32(params[6])
+    zero = np.float32(0.0)
+    one = np.float32(1.0)
+    top = np.float32(255.0)
+    half = np.float32(0.5)
+    width = out.shape[1]
+    for i in range(out.shape[0]):
+        r = r0 + i
+        fl = flags[r, c0:c0 + width]
+        ga = gain[r, c0:c0 + width]
+        sh = sheen[r, c0:c0 + width]
+        start = noise_offset + r * image_width + c0
+        nz = noise[start:start + width]
+        cv = cov[i]
+        wl = wall[i]
+        o = out[i]
+        if with_overlay and not with_light:
+            om = overlay_mask[i]
+            ov = overlay[i]
+            for j in range(width):  # as the fast path below, plus obstacles
+                f = fl[j]
+                is_g = np.float32(f & 1)
+                is_b = np.float32((f >> 1) & 1)
+                is_c = np.float32((f >> 2) & 1)
+                is_o = np.float32(om[j]) * (one - is_b)
+                w = is_c * ceiling + (one - is_c) * (wall_k * np.float32(wl[j]))
+                v = is_g * (mat + k_line * np.float32(cv[j]) + np.float32(sh[j])) + (
+                    one - is_g) * w
+                v = is_o * ov[j] + (one - is_o) * v
+                v = is_b * (bonnet_dn + refl * v) + (one - is_b) * v
+                v = v * ga[j] + sigma * np.float32(nz[j])
+                o[j] = np.uint8(min(max(v, zero), top) + half)
+            continue
+        if not with_light:
+            # Fast path, branch-free so that it vectorises: 0/1 factors blend exactly.
+            for j in range(width):
+                f = fl[j]
+                is_g = np.float32(f & 1)
+                is_b = np.float32((f >> 1) & 1)
+                is_c = np.float32((f >> 2) & 1)
+                w = is_c * ceiling + (one - is_c) * (wall_k * np.float32(wl[j]))
+                v = is_g * (mat + k_line * np.float32(cv[j]) + np.float32(sh[j])) + (
+                    one - is_g) * w
+                v = is_b * (bonnet_dn + refl * v) + (one - is_b) * v
+                v = v * ga[j] + sigma * np.float32(nz[j])
+                o[j] = np.uint8(min(max(v, zero), top) + half)
+            continue
+        for j in range(width):
+            v = mat + k_line * np.float32(cv[j])
+            if with_light:
+                v = v * (np.float32(light[i, j, 0]) * np.float32(1.0 / 255.0)) + np.float32(
+                    light[i, j, 1])
+            f = fl[j]
+            w = ceiling if f & 4 else wall_k * np.float32(wl[j])
+            v = v + np.float32(sh[j]) if f & 1 else w
+            if with_overlay and overlay_mask[i, j] and not f & 2:
                 v = overlay[i, j]
-            else:
-                dist = rho[r, q]
-                to_wall = math.inf
-                if dist >= near_wall:
-                    hx = c * dxa[r, q] - s * dya[r, q]
-                    hy = s * dxa[r, q] + c * dya[r, q]
-                    if hx > 1e-9:
-                        to_wall = (xmax - cam_x) / hx
-                    elif hx < -1e-9:
-                        to_wall = (xmin - cam_x) / hx
-                    if hy > 1e-9:
-                        to_wall = min(to_wall, (ymax - cam_y) / hy)
-                    elif hy < -1e-9:
-                        to_wall = min(to_wall, (ymin - cam_y) / hy)
-                if dist < to_wall:
-                    level = levels[r, q]
-                    px = gx[r, q]
-                    py = gy[r, q]
-                    wx = car_x + c * px - s * py
-                    wy = car_y + s * px + c * py
-                    v = 0.0
-                    for k in range(n_blur):
-                        back = 0.0 if n_blur == 1 else blur_m * k / (n_blur - 1)
-                        v += _ground(wx - back * c, wy - back * s, level, pyramid, offsets,
-                                     shapes, res, ox, oy, light, mat, line, floor)
-                    v = v / n_blur + sheen_map[r, q]
-                else:
-                    z = cam_h + to_wall * tan_el[r, q]
-                    if z >= wall_h:
-                        v = 1.25 * wall_dn
-                    else:
-                        hx = cam_x + to_wall * (c * dxa[r, q] - s * dya[r, q])
-                        hy = cam_y + to_wall * (s * dxa[r, q] + c * dya[r, q])
-                        # Position along the perimeter: bottom, right, top, left wall.
-                        if abs(hy - ymin) < 1e-6 * (1.0 + wall_d) or hy <= ymin:
-                            p = hx - xmin
-                        elif hx >= xmax - 1e-9:
-                            p = wall_w + (hy - ymin)
-                        elif hy >= ymax - 1e-9:
-                            p = wall_w + wall_d + (xmax - hx)
-                        else:
-                            p = 2.0 * wall_w + wall_d + (ymax - hy)
-                        tc = min(max(int(p / WALL_TEXEL_M), 0), wall_tex.shape[1] - 1)
-                        tr = min(max(int(max(z, 0.0) / WALL_TEXEL_M), 0), wall_tex.shape[0] - 1)
-                        v = wall_tex[tr, tc] * wall_scale
-                if bonnet[r, q]:
-                    v = bonnet_dn + refl * v
-            v = v * gain_map[r, q]
-            if noise_dn > 0.0:
-                v += noise_dn * _noise(seed, r * width + q)
-            if v <= 0.0:
-                out[i, j] = 0
-            elif v >= 255.0:
-                out[i, j] = 255
-            else:
-                out[i, j] = int(v + 0.5)
+            v = bonnet_dn + refl * v if f & 2 else v
+            v = v * ga[j] + sigma * np.float32(nz[j])
+            o[j] = np.uint8(min(max(v, zero), top) + half)
 
 
-def _effect_vector(fx: Effects) -> np.ndarray:
-    return np.array([fx.mat_dn, fx.line_dn, fx.floor_dn, fx.wall_dn, fx.gain, fx.vignetting,
-                     fx.noise_dn, fx.glare, fx.bonnet_dn, fx.bonnet_reflectivity])
+@dataclass(frozen=True)
+class _Layout:
+    """Per-pixel constants for one atlas layout and hall (cached by the renderer)."""
+
+    scale: np.ndarray
+    bias_x: np.ndarray
+    bias_y: np.ndarray
+    flags: np.ndarray  # uint8: 1 ground, 2 bonnet, 4 ceiling
+    wall_maps: np.ndarray  # (H, W, 2) wall-texture coordinates at yaw 0
+    ground_rows: tuple[int, int]
+    wall_rows: tuple[int, int]
 
 
 class Renderer:
@@ -273,43 +267,82 @@ class Renderer:
         self.camera = camera or FisheyeCamera.default()
         self.bonnet = bonnet or Bonnet()
         self.geometry = pixel_geometry(self.camera, self.bonnet)
-        self._level_cache: dict[tuple[float, int], np.ndarray] = {}
-        self._effect_cache: dict[Effects, tuple[np.ndarray, np.ndarray]] = {}
-
-    def _levels(self, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-        """Per-pixel mip level (int8) for the scene's map, and the sampler's constants:
-        [light texels per map texel, 1/texel, 2^-0, 2^-1, ...]."""
-        res0 = float(scene.level_res[0])
-        n = len(scene.level_res)
-        key = (res0, n)
-        if key not in self._level_cache:
-            lv = np.rint(self.geometry.log2_fp - math.log2(res0))
-            self._level_cache[key] = np.clip(lv, 0, n - 1).astype(np.int8)
-        consts = np.concatenate(([res0 / LIGHT_RES_M, 1.0 / res0], 0.5 ** np.arange(n)))
-        return self._level_cache[key], consts
-
-    def _effect_maps(self, fx: Effects) -> tuple[np.ndarray, np.ndarray]:
-        """Per-pixel gain (exposure × vignetting) and floor sheen [DN] for ``fx``."""
-        if fx not in self._effect_cache:
-            g = self.geometry
-            gain = (fx.gain * (1.0 - fx.vignetting * g.radius2)).astype(np.float32)
-            sheen = (fx.glare * g.sheen).astype(np.float32)
-            if len(self._effect_cache) > 16:
-                self._effect_cache.clear()
-            self._effect_cache[fx] = (gain, sheen)
-        return self._effect_cache[fx]
+        self._layouts: dict[tuple, _Layout] = {}
+        self._effect_maps: dict[Effects, tuple[np.ndarray, np.ndarray]] = {}
+        self._scratch: dict[tuple, np.ndarray] = {}
+        # A fixed table of N(0, 1) noise; each frame reads it at its own offset.
+        bank = np.random.default_rng(0x7FA1DA).normal(0.0, 16.0, NOISE_BANK_SIZE)
+        self._noise = np.clip(np.rint(bank), -127, 127).astype(np.int8)
 
     @property
     def shape(self) -> tuple[int, int]:
         return self.camera.height, self.camera.width
 
+    # ------------------------------------------------------------------ caches
+    def _layout(self, scene: Scene) -> _Layout:
+        key = (scene.resolution_m, scene.level_origin.tobytes(), scene.hall,
+               scene.wall_texture.shape)
+        if key in self._layouts:
+            return self._layouts[key]
+        g = self.geometry
+        level = np.clip(np.rint(g.log2_fp - math.log2(scene.resolution_m)), 0,
+                        scene.levels - 1).astype(np.int64)
+        scale = (0.5 ** level).astype(np.float32)
+        origin = scene.level_origin
+        bias_x = (0.5 * scale - 0.5 + origin[level, 0]).astype(np.float32)
+        bias_y = (0.5 * scale - 0.5 + origin[level, 1]).astype(np.float32)
+        hall = scene.hall
+        is_ground = (g.rho < hall.distance_m).astype(np.uint8)
+        z = self.camera.mount.height_m + hall.distance_m * g.tan_el.astype(np.float64)
+        tex_rows = scene.wall_texture.shape[0]
+        wall_x = np.mod(g.azimuth.astype(np.float64), 2 * math.pi) * (
+            hall.distance_m / WALL_TEXEL_M)
+        wall_y = np.clip(z / WALL_TEXEL_M, 0.0, tex_rows - 1.0)
+        wall_maps = np.dstack([wall_x, wall_y]).astype(np.float32)
+        ceiling = (is_ground == 0) & (z >= hall.height_m + 0.05)
+        flags = (is_ground | (g.bonnet << 1) | (ceiling.astype(np.uint8) << 2)).astype(np.uint8)
+        rows_ground = np.flatnonzero(is_ground.any(axis=1))
+        rows_wall = np.flatnonzero(((is_ground == 0) & ~ceiling).any(axis=1))
+        layout = _Layout(
+            scale=scale, bias_x=bias_x, bias_y=bias_y, flags=flags, wall_maps=wall_maps,
+            ground_rows=(int(rows_ground[0]), int(rows_ground[-1]) + 1) if len(rows_ground)
+            else (0, 0),
+            wall_rows=(int(rows_wall[0]), int(rows_wall[-1]) + 1) if len(rows_wall) else (0, 0),
+        )
+        if len(self._layouts) > 8:
+            self._layouts.clear()
+        self._layouts[key] = layout
+        return layout
+
+    def _buffer(self, name: str, shape: tuple[int, ...], dtype: type) -> np.ndarray:
+        """A reusable scratch array (fresh large arrays cost page faults every frame)."""
+        key = (name, shape, dtype)
+        buf = self._scratch.get(key)
+        if buf is None:
+            if len(self._scratch) > 64:
+                self._scratch.clear()
+            buf = self._scratch[key] = np.empty(shape, dtype)
+        return buf
+
+    def _maps_for(self, fx: Effects) -> tuple[np.ndarray, np.ndarray]:
+        """Per-pixel gain (exposure × vignetting) and floor sheen [DN] for ``fx``."""
+        if fx not in self._effect_maps:
+            g = self.geometry
+            gain = (fx.gain * (1.0 - fx.vignetting * g.radius2)).astype(np.float32)
+            sheen = np.clip(np.rint(fx.glare * g.sheen), 0, 255).astype(np.uint8)
+            if len(self._effect_maps) > 16:
+                self._effect_maps.clear()
+            self._effect_maps[fx] = (gain, sheen)
+        return self._effect_maps[fx]
+
+    # ------------------------------------------------------------------ render
     def render(self, scene: Scene, pose: tuple[float, float, float], *, speed_m_s: float = 0.0,
                frame_seed: int = 0) -> np.ndarray:
         """Full ``(480, 752)`` uint8 frame for a car at ``pose = (x [m], y [m], yaw [rad])``
-        moving at ``speed_m_s`` (for motion blur); ``frame_seed`` fixes the sensor noise."""
-        (frame,) = self.render_windows(scene, pose, [(0, 0, self.camera.width,
-                                                      self.camera.height)],
-                                       speed_m_s=speed_m_s, frame_seed=frame_seed)
+        moving at ``speed_m_s`` (motion blur); ``frame_seed`` selects the sensor noise."""
+        (frame,) = self.render_windows(
+            scene, pose, [(0, 0, self.camera.width, self.camera.height)],
+            speed_m_s=speed_m_s, frame_seed=frame_seed)
         return frame
 
     def render_windows(self, scene: Scene, pose: tuple[float, float, float],
@@ -319,37 +352,106 @@ class Renderer:
         x, y, yaw = (float(v) for v in pose)
         if not all(math.isfinite(v) for v in (x, y, yaw, speed_m_s)):
             raise ValueError(f"pose and speed must be finite, got {pose}, {speed_m_s}")
-        g = self.geometry
-        mount = self.camera.mount
         fx = scene.effects
-        faces = obstacle_faces(self.camera, scene.boxes, (x, y, yaw), scene.effects.line_dn)
-        levels, consts = self._levels(scene)
-        gain_map, sheen_map = self._effect_maps(fx)
+        layout = self._layout(scene)
+        gain, sheen = self._maps_for(fx)
+        faces = obstacle_faces(self.camera, scene.boxes, (x, y, yaw), fx.line_dn,
+                               scene.hall.distance_m)
+        drawn = _draw_faces(faces, self.camera.width, self.camera.height)
+        width, height = self.camera.width, self.camera.height
+        # Same offset for every window of a frame: noise is a function of the pixel.
+        span = NOISE_BANK_SIZE - width * height
+        noise_offset = int(np.random.default_rng(frame_seed & 0xFFFFFFFF).integers(span))
+        blur_m = speed_m_s * fx.motion_blur_s
+        shifts = (np.linspace(0.0, blur_m, MOTION_BLUR_SAMPLES) if blur_m > 0
+                  else np.zeros(1))
+        params = np.array([fx.mat_dn, fx.line_dn, fx.wall_dn, fx.bonnet_dn,
+                           fx.bonnet_reflectivity, fx.noise_dn, CEILING_FACTOR * fx.wall_dn])
+        wall_shift = (yaw % (2 * math.pi)) * (scene.hall.distance_m / WALL_TEXEL_M)
         out = []
         for win in windows:
             wx0, wy0, ww, wh = (int(v) for v in win)
-            if ww <= 0 or wh <= 0 or wx0 < 0 or wy0 < 0 or wx0 + ww > self.camera.width or (
-                    wy0 + wh > self.camera.height):
-                raise ValueError(f"window {win} is not inside the {self.camera.width}×"
-                                 f"{self.camera.height} image")
-            buf = np.empty((wh, ww), np.uint8)
-            overlay, mask = _draw_faces(faces, (wx0, wy0, ww, wh))
-            _render_window(
-                buf, wy0, wx0, g.gx, g.gy, g.rho, g.dx, g.dy, g.tan_el, levels, gain_map,
-                sheen_map, g.bonnet, scene.pyramid, scene.level_offset, scene.level_shape,
-                consts, scene.origin[0], scene.origin[1], scene.light,
-                np.asarray(scene.hall, dtype=np.float64), scene.wall_height_m,
-                scene.wall_texture, x, y, yaw, mount.forward_m, mount.lateral_m,
-                mount.height_m, speed_m_s * fx.motion_blur_s, _effect_vector(fx),
-                np.uint64(frame_seed & 0xFFFFFFFFFFFFFFFF), overlay, mask, mask.size > 1,
-            )
-            out.append(buf)
+            if ww <= 0 or wh <= 0 or wx0 < 0 or wy0 < 0 or wx0 + ww > width or (
+                    wy0 + wh > height):
+                raise ValueError(f"window {win} is not inside the {width}×{height} image")
+            blur = len(shifts) > 1
+            cov = self._buffer("cov", (wh, ww), np.float32 if blur else np.uint8)
+            if blur:
+                cov.fill(0.0)  # stale float bytes may be NaN, and 0 × NaN is no 0
+            wall = self._buffer("wall", (wh, ww), np.uint8)
+            light = self._buffer("light", (1, 1, 2), np.uint8)
+            g0, g1 = max(wy0, layout.ground_rows[0]), min(wy0 + wh, layout.ground_rows[1])
+            if g1 > g0:
+                band = slice(g0 - wy0, g1 - wy0)
+                maps = self._buffer("maps", (g1 - g0, ww, 2), np.float32)
+                light_maps = self._buffer(
+                    "light_maps", (g1 - g0, ww, 2) if scene.light is not None else (1, 1, 2),
+                    np.float32)
+                sample = self._buffer("sample", (g1 - g0, ww), np.uint8)
+                for k, back in enumerate(shifts):
+                    affine = self._affine(scene, x - back * math.cos(yaw),
+                                          y - back * math.sin(yaw), yaw)
+                    _ground_maps(maps, light_maps, g0, wx0, self.geometry.gx, self.geometry.gy,
+                                 layout.scale, layout.bias_x, layout.bias_y, affine,
+                                 float(scene.level0_size[0]), float(scene.level0_size[1]),
+                                 scene.resolution_m / LIGHT_RES_M,
+                                 scene.light is not None and k == 0)
+                    if blur:
+                        cv2.remap(scene.atlas, maps, None, cv2.INTER_LINEAR, dst=sample,
+                                  borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+                        cov[band] += sample.astype(np.float32) / len(shifts)
+                    else:
+                        cv2.remap(scene.atlas, maps, None, cv2.INTER_LINEAR, dst=cov[band],
+                                  borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+                    if scene.light is not None and k == 0:
+                        light = self._buffer("light", (wh, ww, 2), np.uint8)
+                        cv2.remap(scene.light, light_maps, None, cv2.INTER_LINEAR,
+                                  dst=light[band], borderMode=cv2.BORDER_REPLICATE)
+            s0, s1 = max(wy0, layout.wall_rows[0]), min(wy0 + wh, layout.wall_rows[1])
+            if s1 > s0:
+                wmaps = self._buffer("wall_maps", (s1 - s0, ww, 2), np.float32)
+                _shift_maps(wmaps, layout.wall_maps, s0, wx0, wall_shift)
+                # Nearest texel: at the walls' distance a pixel spans about one texel.
+                cv2.remap(scene.wall_texture, wmaps, None, cv2.INTER_NEAREST,
+                          dst=wall[s0 - wy0:s1 - wy0], borderMode=cv2.BORDER_WRAP)
+            overlay = self._buffer("overlay", (wh, ww), np.float32)
+            mask = self._buffer("overlay_mask", (wh, ww), np.uint8)
+            with_overlay = False
+            if drawn is not None:
+                (ox0, oy0), ov_all, mask_all = drawn
+                ix0, iy0 = max(wx0, ox0), max(wy0, oy0)
+                ix1 = min(wx0 + ww, ox0 + ov_all.shape[1])
+                iy1 = min(wy0 + wh, oy0 + ov_all.shape[0])
+                if ix1 > ix0 and iy1 > iy0:
+                    with_overlay = True
+                    overlay.fill(0.0)
+                    mask.fill(0)
+                    overlay[iy0 - wy0:iy1 - wy0, ix0 - wx0:ix1 - wx0] = ov_all[
+                        iy0 - oy0:iy1 - oy0, ix0 - ox0:ix1 - ox0]
+                    mask[iy0 - wy0:iy1 - wy0, ix0 - wx0:ix1 - wx0] = mask_all[
+                        iy0 - oy0:iy1 - oy0, ix0 - ox0:ix1 - ox0]
+            frame = np.empty((wh, ww), np.uint8)
+            _combine(frame, wy0, wx0, cov, wall, light, scene.light is not None, overlay, mask,
+                     with_overlay, layout.flags, gain, sheen, self._noise, noise_offset, width,
+                     params)
+            out.append(frame)
         return out
 
+    def _affine(self, scene: Scene, x: float, y: float, yaw: float) -> np.ndarray:
+        """Car-frame ground point → level-0 texel coordinates (centres at integers)."""
+        c, s = math.cos(yaw), math.sin(yaw)
+        inv = 1.0 / scene.resolution_m
+        ox, oy = scene.origin
+        return np.array([c * inv, -s * inv, (x - ox) * inv - 0.5,
+                         -s * inv, -c * inv, (oy - y) * inv - 0.5])
+
+
 def obstacle_faces(camera: FisheyeCamera, boxes: np.ndarray, pose: tuple[float, float, float],
-                   white_dn: float = 255.0) -> list[tuple[np.ndarray, float]]:
+                   white_dn: float = 255.0, max_distance_m: float = Hall().distance_m
+                   ) -> list[tuple[np.ndarray, float]]:
     """Visible faces of obstacle boxes ``(n, 8, 3)`` [m] as image polygons [px] with a
-    grey level (white carton lit from above), farthest first (painter's order)."""
+    grey level (white carton lit from above), farthest first (painter's order). Boxes
+    beyond ``max_distance_m`` stand behind the hall's walls."""
     if len(boxes) == 0:
         return []
     x, y, yaw = pose
@@ -362,7 +464,7 @@ def obstacle_faces(camera: FisheyeCamera, boxes: np.ndarray, pose: tuple[float, 
     for box in boxes:
         centre = box.mean(axis=0)
         dist = float(np.linalg.norm(centre - cam_world))
-        if dist > 12.0:
+        if dist > max_distance_m:
             continue
         for quad in quads:
             pts = box[list(quad)]
@@ -383,17 +485,25 @@ def obstacle_faces(camera: FisheyeCamera, boxes: np.ndarray, pose: tuple[float, 
     return [(uv, shade) for _, uv, shade in faces]
 
 
-def _draw_faces(faces: list[tuple[np.ndarray, float]], win: tuple[int, int, int, int]
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Obstacle overlay of one window: grey levels and a coverage mask (1×1 if empty)."""
+def _draw_faces(faces: list[tuple[np.ndarray, float]], width: int, height: int
+                ) -> tuple[tuple[int, int], np.ndarray, np.ndarray] | None:
+    """Draw the obstacle faces once per frame into a buffer covering their bounding box in
+    image coordinates (the same whatever window is asked for, so windows equal crops).
+    Returns its top-left corner, the grey levels and the mask, or None if off-image."""
     if not faces:
-        return np.zeros((1, 1), np.float32), np.zeros((1, 1), np.uint8)
-    x0, y0, w, h = win
-    overlay = np.zeros((h, w), np.float32)
-    mask = np.zeros((h, w), np.uint8)
+        return None
+    pts_all = np.concatenate([uv for uv, _ in faces])
+    x0 = max(0, int(np.floor(pts_all[:, 0].min())) - 1)
+    y0 = max(0, int(np.floor(pts_all[:, 1].min())) - 1)
+    x1 = min(width, int(np.ceil(pts_all[:, 0].max())) + 2)
+    y1 = min(height, int(np.ceil(pts_all[:, 1].max())) + 2)
+    if x1 <= x0 or y1 <= y0:
+        return None
+    overlay = np.zeros((y1 - y0, x1 - x0), np.float32)
+    mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
     shift = 4  # sub-pixel vertices: 1/16 px
     for uv, shade in faces:
         pts = np.rint((uv - np.array([x0, y0])) * (1 << shift)).astype(np.int32)
         cv2.fillPoly(overlay, [pts], float(shade), lineType=cv2.LINE_8, shift=shift)
         cv2.fillPoly(mask, [pts], 1, lineType=cv2.LINE_8, shift=shift)
-    return overlay, mask
+    return (x0, y0), overlay, mask
