@@ -8,7 +8,9 @@ Frames:
 Projection (identical to ``cv2.fisheye.projectPoints``): for a camera-frame point,
 θ = angle from the optical axis, θ_d = θ·(1 + k1θ² + k2θ⁴ + k3θ⁶ + k4θ⁸), and the pixel is
 ``K · (θ_d · (x, y)/‖(x, y)‖, 1)``. With D = 0 this is the equidistant fisheye r = f·θ.
-A real calibration (``K``, ``D`` from ``cv2.fisheye.calibrate``) plugs in unchanged.
+A real calibration (``K``, ``D`` from ``cv2.fisheye.calibrate``) plugs in unchanged; its
+skew is ``K[0, 1] = α·fx`` (pass ``alpha=K[0, 1] / K[0, 0]`` to
+``cv2.fisheye.projectPoints``, which reads only fx, fy, cx, cy from ``K``).
 """
 
 from __future__ import annotations

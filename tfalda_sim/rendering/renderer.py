@@ -121,12 +121,17 @@ def pixel_geometry(camera: FisheyeCamera, bonnet: Bonnet | None = None) -> Pixel
     )
 
 
+_PAD = -8.0
+"""Map coordinate for padding pixels: outside the atlas and wall texture (reads 0)."""
+
+
 @njit(cache=True, error_model="numpy")
-def _ground_maps(maps: np.ndarray, light_maps: np.ndarray, r0: int, c0: int, gx: np.ndarray,
-                 gy: np.ndarray, scale: np.ndarray, bias_x: np.ndarray, bias_y: np.ndarray,
-                 affine: np.ndarray, size_x: float, size_y: float, light_scale: float,
-                 with_light: bool) -> None:
-    """Atlas coordinates of each pixel's ground hit (pixel centres at integers)."""
+def _ground_maps(maps: np.ndarray, light_maps: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                 widths: np.ndarray, gx: np.ndarray, gy: np.ndarray, scale: np.ndarray,
+                 bias_x: np.ndarray, bias_y: np.ndarray, affine: np.ndarray, size_x: float,
+                 size_y: float, light_scale: float, with_light: bool) -> None:
+    """Atlas coordinates (pixel centres at integers) of the ground hits of the stacked
+    rows: stacked row t is image row ``rows[t]``, columns ``cols[t]`` … + ``widths[t]``."""
     a00, a01, a02, a10, a11, a12 = (np.float32(affine[0]), np.float32(affine[1]),
                                     np.float32(affine[2]), np.float32(affine[3]),
                                     np.float32(affine[4]), np.float32(affine[5]))
@@ -134,47 +139,64 @@ def _ground_maps(maps: np.ndarray, light_maps: np.ndarray, r0: int, c0: int, gx:
     hx = np.float32(size_x + 1.0)
     hy = np.float32(size_y + 1.0)
     ls = np.float32(light_scale)
-    width = maps.shape[1]
     half = np.float32(0.5)
-    for i in range(maps.shape[0]):
-        gxr = gx[r0 + i, c0:c0 + width]
-        gyr = gy[r0 + i, c0:c0 + width]
-        sr = scale[r0 + i, c0:c0 + width]
-        bxr = bias_x[r0 + i, c0:c0 + width]
-        byr = bias_y[r0 + i, c0:c0 + width]
-        m = maps[i].reshape(2 * width)  # interleaved (x, y): contiguous stores
+    pad = np.float32(_PAD)
+    span = maps.shape[1]
+    for t in range(maps.shape[0]):
+        r = rows[t]
+        c0 = cols[t]
+        width = widths[t]
+        gxr = gx[r, c0:c0 + width]
+        gyr = gy[r, c0:c0 + width]
+        sr = scale[r, c0:c0 + width]
+        bxr = bias_x[r, c0:c0 + width]
+        byr = bias_y[r, c0:c0 + width]
+        m = maps[t].reshape(2 * span)  # interleaved (x, y): contiguous stores
         for j in range(width):
             # Level-0 texel coordinates, clamped into the level's zero guard band.
             x = min(max(a00 * gxr[j] + a01 * gyr[j] + a02, lo), hx)
             y = min(max(a10 * gxr[j] + a11 * gyr[j] + a12, lo), hy)
             m[2 * j] = x * sr[j] + bxr[j]
             m[2 * j + 1] = y * sr[j] + byr[j]
+        for j in range(2 * width, 2 * span):
+            m[j] = pad
         if with_light:
-            lm = light_maps[i].reshape(2 * width)
+            lm = light_maps[t].reshape(2 * span)
             for j in range(width):
                 lm[2 * j] = min(max(a00 * gxr[j] + a01 * gyr[j] + a02, lo), hx) * ls - half
                 lm[2 * j + 1] = min(max(a10 * gxr[j] + a11 * gyr[j] + a12, lo), hy) * ls - half
+            for j in range(2 * width, 2 * span):
+                lm[j] = pad
 
 
 @njit(cache=True, error_model="numpy")
-def _shift_maps(out: np.ndarray, static: np.ndarray, r0: int, c0: int, shift: float) -> None:
-    """``out = static[r0:, c0:] + (shift, 0)`` for interleaved (x, y) maps."""
+def _wall_maps(out: np.ndarray, rows: np.ndarray, cols: np.ndarray, widths: np.ndarray,
+               static: np.ndarray, shift: float) -> None:
+    """Wall-texture coordinates of the stacked rows: the yaw-0 map shifted by the yaw."""
     s = np.float32(shift)
-    width = out.shape[1]
-    for i in range(out.shape[0]):
-        o = out[i].reshape(2 * width)
-        st = static[r0 + i].reshape(2 * static.shape[1])
-        for j in range(width):
+    pad = np.float32(_PAD)
+    span = out.shape[1]
+    full = static.shape[1]
+    for t in range(out.shape[0]):
+        o = out[t].reshape(2 * span)
+        st = static[rows[t]].reshape(2 * full)
+        c0 = cols[t]
+        for j in range(widths[t]):
             o[2 * j] = st[2 * (c0 + j)] + s
             o[2 * j + 1] = st[2 * (c0 + j) + 1]
+        for j in range(2 * widths[t], 2 * span):
+            o[j] = pad
 
 
 @njit(cache=True, error_model="numpy")
-def _combine(out: np.ndarray, r0: int, c0: int, cov: np.ndarray, wall: np.ndarray,
+def _combine(out: np.ndarray, rows: np.ndarray, cols: np.ndarray, widths: np.ndarray,
+             g_index: np.ndarray, s_index: np.ndarray, cov: np.ndarray, wall: np.ndarray,
              light: np.ndarray, with_light: bool, overlay: np.ndarray, overlay_mask: np.ndarray,
-             with_overlay: bool, flags: np.ndarray, gain: np.ndarray, sheen: np.ndarray,
-             noise: np.ndarray, noise_offset: int, image_width: int, params: np.ndarray) -> None:
-    """Final grey levels. ``flags``: 1 ground, 2 bonnet, 4 ceiling (wall texture skipped)."""
+             overlay_x0: int, overlay_y0: int, with_overlay: bool, flags: np.ndarray,
+             gain: np.ndarray, sheen: np.ndarray, noise: np.ndarray, noise_offset: int,
+             image_width: int, params: np.ndarray) -> None:
+    """Final grey levels of the stacked rows. ``flags``: 1 ground, 2 bonnet, 4 ceiling.
+    ``g_index``/``s_index``: the row of ``cov``/``wall`` holding that row's ground/wall."""
     mat = np.float32(params[0])
     k_line = np.float32((params[1] - params[0]) / 255.0)
     wall_k = np.float32(params[2] / 128.0)
@@ -186,35 +208,23 @@ def _combine(out: np.ndarray, r0: int, c0: int, cov: np.ndarray, wall: np.ndarra
     one = np.float32(1.0)
     top = np.float32(255.0)
     half = np.float32(0.5)
-    width = out.shape[1]
-    for i in range(out.shape[0]):
-        r = r0 + i
+    inv255 = np.float32(1.0 / 255.0)
+    for t in range(out.shape[0]):
+        r = rows[t]
+        c0 = cols[t]
+        width = widths[t]
         fl = flags[r, c0:c0 + width]
         ga = gain[r, c0:c0 + width]
         sh = sheen[r, c0:c0 + width]
         start = noise_offset + r * image_width + c0
         nz = noise[start:start + width]
-        cv = cov[i]
-        wl = wall[i]
-        o = out[i]
-        if with_overlay and not with_light:
-            om = overlay_mask[i]
-            ov = overlay[i]
-            for j in range(width):  # as the fast path below, plus obstacles
-                f = fl[j]
-                is_g = np.float32(f & 1)
-                is_b = np.float32((f >> 1) & 1)
-                is_c = np.float32((f >> 2) & 1)
-                is_o = np.float32(om[j]) * (one - is_b)
-                w = is_c * ceiling + (one - is_c) * (wall_k * np.float32(wl[j]))
-                v = is_g * (mat + k_line * np.float32(cv[j]) + np.float32(sh[j])) + (
-                    one - is_g) * w
-                v = is_o * ov[j] + (one - is_o) * v
-                v = is_b * (bonnet_dn + refl * v) + (one - is_b) * v
-                v = v * ga[j] + sigma * np.float32(nz[j])
-                o[j] = np.uint8(min(max(v, zero), top) + half)
-            continue
-        if not with_light:
+        cv = cov[g_index[t]]
+        wl = wall[s_index[t]]
+        o = out[t]
+        o_row = r - overlay_y0
+        o_hit = with_overlay and 0 <= o_row < overlay_mask.shape[0] and (
+            c0 < overlay_x0 + overlay_mask.shape[1] and c0 + width > overlay_x0)
+        if not (with_light or o_hit):
             # Fast path, branch-free so that it vectorises: 0/1 factors blend exactly.
             for j in range(width):
                 f = fl[j]
@@ -228,17 +238,24 @@ def _combine(out: np.ndarray, r0: int, c0: int, cov: np.ndarray, wall: np.ndarra
                 v = v * ga[j] + sigma * np.float32(nz[j])
                 o[j] = np.uint8(min(max(v, zero), top) + half)
             continue
+        li = g_index[t]
         for j in range(width):
+            f = fl[j]
             v = mat + k_line * np.float32(cv[j])
             if with_light:
-                v = v * (np.float32(light[i, j, 0]) * np.float32(1.0 / 255.0)) + np.float32(
-                    light[i, j, 1])
-            f = fl[j]
-            w = ceiling if f & 4 else wall_k * np.float32(wl[j])
-            v = v + np.float32(sh[j]) if f & 1 else w
-            if with_overlay and overlay_mask[i, j] and not f & 2:
-                v = overlay[i, j]
-            v = bonnet_dn + refl * v if f & 2 else v
+                v = v * (np.float32(light[li, j, 0]) * inv255) + np.float32(light[li, j, 1])
+            if f & 1:
+                v = v + np.float32(sh[j])
+            elif f & 4:
+                v = ceiling
+            else:
+                v = wall_k * np.float32(wl[j])
+            if o_hit and not f & 2:
+                oc = c0 + j - overlay_x0
+                if 0 <= oc < overlay_mask.shape[1] and overlay_mask[o_row, oc]:
+                    v = overlay[o_row, oc]
+            if f & 2:
+                v = bonnet_dn + refl * v
             v = v * ga[j] + sigma * np.float32(nz[j])
             o[j] = np.uint8(min(max(v, zero), top) + half)
 
@@ -348,93 +365,96 @@ class Renderer:
     def render_windows(self, scene: Scene, pose: tuple[float, float, float],
                        windows: list[tuple[int, int, int, int]], *, speed_m_s: float = 0.0,
                        frame_seed: int = 0) -> list[np.ndarray]:
-        """Render only the windows ``(x, y, width, height)`` [px] (inside the image)."""
+        """Render only the windows ``(x, y, width, height)`` [px] (inside the image).
+
+        All windows of a call are rendered together, row by row, so four small ROIs cost
+        little more than their pixels."""
         x, y, yaw = (float(v) for v in pose)
         if not all(math.isfinite(v) for v in (x, y, yaw, speed_m_s)):
             raise ValueError(f"pose and speed must be finite, got {pose}, {speed_m_s}")
-        fx = scene.effects
-        layout = self._layout(scene)
-        gain, sheen = self._maps_for(fx)
-        faces = obstacle_faces(self.camera, scene.boxes, (x, y, yaw), fx.line_dn,
-                               scene.hall.distance_m)
-        drawn = _draw_faces(faces, self.camera.width, self.camera.height)
         width, height = self.camera.width, self.camera.height
-        # Same offset for every window of a frame: noise is a function of the pixel.
-        span = NOISE_BANK_SIZE - width * height
-        noise_offset = int(np.random.default_rng(frame_seed & 0xFFFFFFFF).integers(span))
-        blur_m = speed_m_s * fx.motion_blur_s
-        shifts = (np.linspace(0.0, blur_m, MOTION_BLUR_SAMPLES) if blur_m > 0
-                  else np.zeros(1))
-        params = np.array([fx.mat_dn, fx.line_dn, fx.wall_dn, fx.bonnet_dn,
-                           fx.bonnet_reflectivity, fx.noise_dn, CEILING_FACTOR * fx.wall_dn])
-        wall_shift = (yaw % (2 * math.pi)) * (scene.hall.distance_m / WALL_TEXEL_M)
-        out = []
-        for win in windows:
-            wx0, wy0, ww, wh = (int(v) for v in win)
+        boxes = [tuple(int(v) for v in win) for win in windows]
+        if not boxes:
+            return []
+        for win, (wx0, wy0, ww, wh) in zip(windows, boxes, strict=True):
             if ww <= 0 or wh <= 0 or wx0 < 0 or wy0 < 0 or wx0 + ww > width or (
                     wy0 + wh > height):
                 raise ValueError(f"window {win} is not inside the {width}×{height} image")
-            blur = len(shifts) > 1
-            cov = self._buffer("cov", (wh, ww), np.float32 if blur else np.uint8)
-            if blur:
-                cov.fill(0.0)  # stale float bytes may be NaN, and 0 × NaN is no 0
-            wall = self._buffer("wall", (wh, ww), np.uint8)
-            light = self._buffer("light", (1, 1, 2), np.uint8)
-            g0, g1 = max(wy0, layout.ground_rows[0]), min(wy0 + wh, layout.ground_rows[1])
-            if g1 > g0:
-                band = slice(g0 - wy0, g1 - wy0)
-                maps = self._buffer("maps", (g1 - g0, ww, 2), np.float32)
-                light_maps = self._buffer(
-                    "light_maps", (g1 - g0, ww, 2) if scene.light is not None else (1, 1, 2),
-                    np.float32)
-                sample = self._buffer("sample", (g1 - g0, ww), np.uint8)
-                for k, back in enumerate(shifts):
-                    affine = self._affine(scene, x - back * math.cos(yaw),
-                                          y - back * math.sin(yaw), yaw)
-                    _ground_maps(maps, light_maps, g0, wx0, self.geometry.gx, self.geometry.gy,
-                                 layout.scale, layout.bias_x, layout.bias_y, affine,
-                                 float(scene.level0_size[0]), float(scene.level0_size[1]),
-                                 scene.resolution_m / LIGHT_RES_M,
-                                 scene.light is not None and k == 0)
-                    if blur:
-                        cv2.remap(scene.atlas, maps, None, cv2.INTER_LINEAR, dst=sample,
-                                  borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-                        cov[band] += sample.astype(np.float32) / len(shifts)
-                    else:
-                        cv2.remap(scene.atlas, maps, None, cv2.INTER_LINEAR, dst=cov[band],
-                                  borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-                    if scene.light is not None and k == 0:
-                        light = self._buffer("light", (wh, ww, 2), np.uint8)
-                        cv2.remap(scene.light, light_maps, None, cv2.INTER_LINEAR,
-                                  dst=light[band], borderMode=cv2.BORDER_REPLICATE)
-            s0, s1 = max(wy0, layout.wall_rows[0]), min(wy0 + wh, layout.wall_rows[1])
-            if s1 > s0:
-                wmaps = self._buffer("wall_maps", (s1 - s0, ww, 2), np.float32)
-                _shift_maps(wmaps, layout.wall_maps, s0, wx0, wall_shift)
-                # Nearest texel: at the walls' distance a pixel spans about one texel.
-                cv2.remap(scene.wall_texture, wmaps, None, cv2.INTER_NEAREST,
-                          dst=wall[s0 - wy0:s1 - wy0], borderMode=cv2.BORDER_WRAP)
-            overlay = self._buffer("overlay", (wh, ww), np.float32)
-            mask = self._buffer("overlay_mask", (wh, ww), np.uint8)
-            with_overlay = False
-            if drawn is not None:
-                (ox0, oy0), ov_all, mask_all = drawn
-                ix0, iy0 = max(wx0, ox0), max(wy0, oy0)
-                ix1 = min(wx0 + ww, ox0 + ov_all.shape[1])
-                iy1 = min(wy0 + wh, oy0 + ov_all.shape[0])
-                if ix1 > ix0 and iy1 > iy0:
-                    with_overlay = True
-                    overlay.fill(0.0)
-                    mask.fill(0)
-                    overlay[iy0 - wy0:iy1 - wy0, ix0 - wx0:ix1 - wx0] = ov_all[
-                        iy0 - oy0:iy1 - oy0, ix0 - ox0:ix1 - ox0]
-                    mask[iy0 - wy0:iy1 - wy0, ix0 - wx0:ix1 - wx0] = mask_all[
-                        iy0 - oy0:iy1 - oy0, ix0 - ox0:ix1 - ox0]
-            frame = np.empty((wh, ww), np.uint8)
-            _combine(frame, wy0, wx0, cov, wall, light, scene.light is not None, overlay, mask,
-                     with_overlay, layout.flags, gain, sheen, self._noise, noise_offset, width,
-                     params)
-            out.append(frame)
+        fx = scene.effects
+        layout = self._layout(scene)
+        gain, sheen = self._maps_for(fx)
+        # Stacked rows: every row of every window, in order.
+        rows = np.concatenate([np.arange(wy0, wy0 + wh) for _, wy0, _, wh in boxes])
+        cols = np.concatenate([np.full(wh, wx0) for wx0, _, _, wh in boxes])
+        widths = np.concatenate([np.full(wh, ww) for _, _, ww, wh in boxes])
+        span = int(widths.max())
+        g_rows = np.flatnonzero((rows >= layout.ground_rows[0]) & (rows < layout.ground_rows[1]))
+        s_rows = np.flatnonzero((rows >= layout.wall_rows[0]) & (rows < layout.wall_rows[1]))
+        n_g, n_s = len(g_rows), len(s_rows)
+        g_index = np.full(len(rows), n_g, np.int64)  # row n_g of ``cov`` stays 0
+        g_index[g_rows] = np.arange(n_g)
+        s_index = np.full(len(rows), n_s, np.int64)
+        s_index[s_rows] = np.arange(n_s)
+
+        blur_m = speed_m_s * fx.motion_blur_s
+        shifts = np.linspace(0.0, blur_m, MOTION_BLUR_SAMPLES) if blur_m > 0 else np.zeros(1)
+        blur = len(shifts) > 1
+        cov = self._buffer("cov", (n_g + 1, span), np.float32 if blur else np.uint8)
+        cov[n_g] = 0
+        if blur:
+            cov.fill(0.0)  # stale float bytes may be NaN, and 0 × NaN is no 0
+        with_light = scene.light is not None
+        light = self._buffer("light", (n_g + 1, span, 2) if with_light else (1, 1, 2), np.uint8)
+        if n_g:
+            maps = self._buffer("maps", (n_g, span, 2), np.float32)
+            light_maps = self._buffer("light_maps", (n_g, span, 2) if with_light else (1, 1, 2),
+                                      np.float32)
+            sample = self._buffer("sample", (n_g, span), np.uint8)
+            rg, cg, wg = rows[g_rows], cols[g_rows], widths[g_rows]
+            for k, back in enumerate(shifts):
+                affine = self._affine(scene, x - back * math.cos(yaw), y - back * math.sin(yaw),
+                                      yaw)
+                _ground_maps(maps, light_maps, rg, cg, wg, self.geometry.gx, self.geometry.gy,
+                             layout.scale, layout.bias_x, layout.bias_y, affine,
+                             float(scene.level0_size[0]), float(scene.level0_size[1]),
+                             scene.resolution_m / LIGHT_RES_M, with_light and k == 0)
+                target = sample if blur else cov[:n_g]
+                cv2.remap(scene.atlas, maps, None, cv2.INTER_LINEAR, dst=target,
+                          borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+                if blur:
+                    cov[:n_g] += sample.astype(np.float32) / len(shifts)
+                if with_light and k == 0:
+                    cv2.remap(scene.light, light_maps, None, cv2.INTER_LINEAR, dst=light[:n_g],
+                              borderMode=cv2.BORDER_REPLICATE)
+        wall = self._buffer("wall", (n_s + 1, span), np.uint8)
+        wall[n_s] = 0
+        if n_s:
+            wmaps = self._buffer("wall_maps", (n_s, span, 2), np.float32)
+            _wall_maps(wmaps, rows[s_rows], cols[s_rows], widths[s_rows], layout.wall_maps,
+                       (yaw % (2 * math.pi)) * (scene.hall.distance_m / WALL_TEXEL_M))
+            # Nearest texel: at the walls' distance a pixel spans about one texel.
+            cv2.remap(scene.wall_texture, wmaps, None, cv2.INTER_NEAREST, dst=wall[:n_s],
+                      borderMode=cv2.BORDER_WRAP)
+        faces = obstacle_faces(self.camera, scene.boxes, (x, y, yaw), fx.line_dn,
+                               scene.hall.distance_m)
+        drawn = _draw_faces(faces, width, height)
+        (ox0, oy0), overlay, mask = drawn if drawn is not None else (
+            (0, 0), np.zeros((1, 1), np.float32), np.zeros((1, 1), np.uint8))
+        # Same noise offset for every window of a frame: noise is a function of the pixel.
+        noise_offset = int(np.random.default_rng(frame_seed & 0xFFFFFFFF).integers(
+            NOISE_BANK_SIZE - width * height))
+        params = np.array([fx.mat_dn, fx.line_dn, fx.wall_dn, fx.bonnet_dn,
+                           fx.bonnet_reflectivity, fx.noise_dn, CEILING_FACTOR * fx.wall_dn])
+        stacked = np.empty((len(rows), span), np.uint8)
+        _combine(stacked, rows, cols, widths, g_index, s_index, cov, wall, light, with_light,
+                 overlay, mask, ox0, oy0, drawn is not None, layout.flags, gain, sheen,
+                 self._noise, noise_offset, width, params)
+        out = []
+        start = 0
+        for _, _, ww, wh in boxes:
+            block = stacked[start:start + wh, :ww]
+            out.append(block if ww == span else np.ascontiguousarray(block))
+            start += wh
         return out
 
     def _affine(self, scene: Scene, x: float, y: float, yaw: float) -> np.ndarray:

@@ -1,0 +1,190 @@
+"""The renderer: geometry to within a pixel, windows equal crops, effects do their job."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from tests.conftest import generated
+from tfalda_sim.rendering import (
+    Bonnet, DomainRandomization, Effects, Renderer, build_scene, frame_truth,
+)
+from tracks import Marking, Track, load_named
+
+ROIS = [(195, 260, 150, 75), (365, 260, 150, 75), (80, 340, 180, 85), (429, 340, 180, 85)]
+
+
+@pytest.fixture(scope="module")
+def renderer() -> Renderer:
+    return Renderer()
+
+
+def lane_pose(track: Track, s: float, lateral: float | None = None) -> tuple[float, float, float]:
+    """The car's reference point at arc length ``s`` [m], in the middle of the right lane
+    (or at ``lateral`` [m]), heading along the road."""
+    lat = -0.5 * track.lane_width_m if lateral is None else lateral
+    x, y, h = track.pose(s, lat)
+    return float(x), float(y), float(h)
+
+
+def test_marking_appears_within_a_pixel_of_its_projection(renderer: Renderer) -> None:
+    track = load_named("straight")
+    scene = build_scene(track, Effects.off())
+    pose = lane_pose(track, 1.0)
+    frame = renderer.render(scene, pose).astype(np.float64)
+    cam = renderer.camera
+    for line_lateral in (-0.4, 0.0):  # right side line, centre line (dashes)
+        s = 1.0 + np.linspace(0.25, 3.0, 6000)
+        pts = np.zeros((len(s), 3))
+        pts[:, :2] = track.position(s, line_lateral)
+        uv = cam.project_world(pts, pose)
+        checked = 0
+        for row in range(250, 440, 10):
+            if not uv[:, 1].min() < row < uv[:, 1].max():
+                continue
+            u = float(np.interp(row, uv[::-1, 1], uv[::-1, 0]))
+            lo, hi = int(u) - 8, int(u) + 9
+            profile = frame[row, lo:hi] - frame[row, lo:hi].min()
+            if profile.max() < 40:  # a gap between two dashes
+                continue
+            centroid = lo + float((profile * np.arange(hi - lo)).sum() / profile.sum())
+            assert abs(centroid - u) < 1.0, (line_lateral, row, centroid, u)
+            checked += 1
+        assert checked >= 8
+
+
+def random_windows(rng: np.random.Generator, n: int) -> list[tuple[int, int, int, int]]:
+    wins = []
+    for _ in range(n):
+        w, h = int(rng.integers(1, 300)), int(rng.integers(1, 200))
+        wins.append((int(rng.integers(0, 752 - w + 1)), int(rng.integers(0, 480 - h + 1)), w, h))
+    return wins
+
+
+@pytest.mark.parametrize("variant", ["off", "default", "randomized"])
+def test_windows_equal_crops_of_the_full_frame(renderer: Renderer, variant: str) -> None:
+    rng = np.random.default_rng(7)
+    track = generated(3)  # has obstacles and an intersection
+    fx = {"off": Effects.off(), "default": Effects(),
+          "randomized": replace(DomainRandomization().sample(rng), motion_blur_s=0.004,
+                                shadows=2, glare_spots=2)}[variant]
+    scene = build_scene(track, fx, rng)
+    poses = [lane_pose(track, ob.s_m - 0.9) for ob in track.obstacles]
+    poses += [lane_pose(track, track.intersections[0].s1_m - 1.5), lane_pose(track, 2.0)]
+    for k, pose in enumerate(poses):
+        full = renderer.render(scene, pose, speed_m_s=3.0, frame_seed=k)
+        wins = [*ROIS, *random_windows(rng, 6), (0, 0, 752, 480)]
+        parts = renderer.render_windows(scene, pose, wins, speed_m_s=3.0, frame_seed=k)
+        for (x, y, w, h), part in zip(wins, parts, strict=True):
+            assert part.shape == (h, w) and part.dtype == np.uint8
+            assert np.array_equal(part, full[y:y + h, x:x + w]), (variant, k, (x, y, w, h))
+
+
+def test_same_seed_same_frame_and_noise_differs_by_seed(renderer: Renderer) -> None:
+    track = load_named("oval")
+    scene = build_scene(track, Effects(noise_dn=4.0))
+    pose = lane_pose(track, 1.0)
+    a = renderer.render(scene, pose, frame_seed=3)
+    assert np.array_equal(a, renderer.render(scene, pose, frame_seed=3))
+    b = renderer.render(scene, pose, frame_seed=4)
+    diff = a.astype(int) - b.astype(int)
+    assert 3.0 < diff.std() < 8.0  # two independent N(0, 4) draws differ by σ·√2
+
+
+def test_sensor_noise_has_the_requested_spread(renderer: Renderer) -> None:
+    track = load_named("straight")
+    pose = lane_pose(track, 1.0)
+    clean = renderer.render(build_scene(track, Effects.off()), pose).astype(float)
+    noisy = renderer.render(build_scene(track, replace(Effects.off(), noise_dn=5.0)), pose,
+                            frame_seed=1).astype(float)
+    inside = (clean > 10) & (clean < 245)
+    assert (noisy - clean)[inside].std() == pytest.approx(5.0, rel=0.1)
+
+
+def test_gain_and_vignetting(renderer: Renderer) -> None:
+    track = load_named("straight")
+    pose = lane_pose(track, 1.0)
+    base = renderer.render(build_scene(track, Effects.off()), pose).astype(float)
+    bright = renderer.render(build_scene(track, replace(Effects.off(), gain=1.5)), pose)
+    mat = (base > 20) & (base < 60)
+    assert np.median(bright[mat] / base[mat]) == pytest.approx(1.5, abs=0.05)
+    vig = renderer.render(build_scene(track, replace(Effects.off(), vignetting=0.5)), pose)
+    ratio = vig.astype(float) / np.maximum(base, 1)
+    assert ratio[470, 5] < 0.6 < 0.95 < ratio[240, 376]
+
+
+def test_far_dashes_fade_but_do_not_vanish(renderer: Renderer) -> None:
+    """Mip-mapping keeps distant centre-line dashes visible as a faint band."""
+    track = load_named("straight")
+    scene = build_scene(track, Effects.off())
+    pose = lane_pose(track, 0.3)
+    frame = renderer.render(scene, pose).astype(float)
+    pts = np.zeros((1, 3))
+    pts[0, :2] = track.position(0.3 + 6.0, 0.0)  # centre line 6 m ahead
+    u, v = renderer.camera.project_world(pts, pose)[0]
+    patch = frame[int(v) - 1:int(v) + 2, int(u) - 3:int(u) + 4]
+    assert patch.max() > Effects.off().mat_dn + 8
+
+
+def test_far_dashes_do_not_shimmer(renderer: Renderer) -> None:
+    """Driving 2 cm per frame, a far patch's brightness changes smoothly."""
+    track = load_named("straight")
+    scene = build_scene(track, Effects.off())
+    means = []
+    for k in range(40):
+        pose = lane_pose(track, 0.3 + 0.02 * k)
+        means.append(renderer.render_windows(scene, pose, [(340, 222, 60, 6)])[0].mean())
+    steps = np.abs(np.diff(means))
+    assert steps.max() < 2.0  # DN per 2 cm of travel
+
+
+def test_bonnet_is_dark_and_reflects_the_lines(renderer: Renderer) -> None:
+    track = load_named("straight")
+    pose = lane_pose(track, 1.0)
+    plain = renderer.render(build_scene(track, replace(Effects.off(), bonnet_dn=20.0)), pose)
+    shiny = renderer.render(build_scene(track, replace(Effects.off(), bonnet_dn=20.0,
+                                                       bonnet_reflectivity=0.3)), pose)
+    bonnet = renderer.geometry.bonnet.astype(bool)
+    assert np.all(plain[bonnet] == 20)
+    assert shiny[bonnet].max() > 20 + 0.3 * 150  # a mirrored white line
+    assert np.all(renderer.geometry.bonnet[:430] == 0) and np.all(renderer.geometry.bonnet[470:])
+    flat = Renderer(bonnet=Bonnet(enabled=False))
+    assert not flat.geometry.bonnet.any()
+
+
+def test_obstacle_hides_the_road_behind_it(renderer: Renderer) -> None:
+    track = generated(3)
+    ob = track.obstacles[0]
+    scene = build_scene(track, Effects.off())
+    pose = lane_pose(track, ob.s_m - 1.0, -0.5 * track.lane_width_m + ob.offset_m
+                     if ob.lane.value == "right" else None)
+    frame = renderer.render(scene, pose)
+    truth = frame_truth(track, renderer.camera, pose)
+    carton = truth.labels == Marking.OBSTACLE
+    assert carton.sum() > 200
+    assert np.median(frame[carton]) > 0.7 * Effects.off().line_dn  # white carton
+
+
+@pytest.mark.parametrize("window", [(-1, 0, 10, 10), (700, 0, 60, 10), (0, 0, 0, 5)])
+def test_windows_outside_the_image_are_refused(renderer: Renderer, window: tuple) -> None:
+    scene = build_scene(load_named("oval"), Effects.off())
+    with pytest.raises(ValueError, match="not inside"):
+        renderer.render_windows(scene, lane_pose(load_named("oval"), 1.0), [window])
+
+
+def test_nan_pose_is_refused(renderer: Renderer) -> None:
+    scene = build_scene(load_named("oval"), Effects.off())
+    with pytest.raises(ValueError, match="finite"):
+        renderer.render(scene, (math.nan, 0.0, 0.0))
+
+
+def test_walls_turn_with_the_car(renderer: Renderer) -> None:
+    track = load_named("oval")
+    scene = build_scene(track, Effects.off())
+    x, y, h = lane_pose(track, 1.0)
+    a = renderer.render_windows(scene, (x, y, h), [(0, 0, 752, 120)])[0]
+    b = renderer.render_windows(scene, (x, y, h + 0.3), [(0, 0, 752, 120)])[0]
+    assert not np.array_equal(a, b)
