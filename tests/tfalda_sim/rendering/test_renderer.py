@@ -10,7 +10,12 @@ import pytest
 
 from tests.conftest import generated
 from tfalda_sim.rendering import (
-    Bonnet, DomainRandomization, Effects, Renderer, build_scene, frame_truth,
+    Bonnet,
+    DomainRandomization,
+    Effects,
+    Renderer,
+    build_scene,
+    frame_truth,
 )
 from tracks import Marking, Track, load_named
 
