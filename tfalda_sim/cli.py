@@ -11,9 +11,14 @@ import argparse
 import json
 import math
 import sys
+import time
 from collections.abc import Sequence
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
+
+import cv2
+import numpy as np
 
 from tracks.fileformat import TrackFileError, load_track, save_track
 from tracks.generator import GeneratorParams, generate
@@ -117,6 +122,81 @@ def _cmd_track_list(args: argparse.Namespace) -> int:
     return 0
 
 
+def _load_track_arg(text: str) -> Track:
+    """A named track, a seed (generated track) or a track file."""
+    if text in NAMED_TRACKS:
+        return load_track(named_path(text))
+    if text.isdigit():
+        return generate(int(text))
+    path = Path(text)
+    if path.suffix.lower() == ".json":
+        try:
+            return load_track(path)
+        except TrackFileError as exc:
+            raise CliError(str(exc)) from None
+    raise CliError(f"--track {text!r} is neither a named track ({', '.join(NAMED_TRACKS)}), "
+                   "a seed (a non-negative integer) nor a .json track file")
+
+
+def _write_png(path: Path, image: np.ndarray) -> str:
+    ok, buf = cv2.imencode(".png", image)
+    if not ok:
+        raise CliError(f"could not encode {path}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(buf.tobytes())
+    return str(path)
+
+
+def _cmd_render(args: argparse.Namespace) -> int:
+    from tfalda_sim.rendering import (
+        DomainRandomization, Effects, Renderer, build_scene, frame_truth,
+    )
+
+    outputs = [p for p in (args.out, args.truth) if p is not None]
+    for p in outputs:
+        if p.suffix.lower() != ".png":
+            raise CliError(f"{p} must be a .png file")
+    existing = [str(p) for p in outputs if p.exists()]
+    if existing and not args.force:
+        raise CliError(f"{', '.join(existing)} exists; add --force to overwrite")
+    track = _load_track_arg(args.track)
+    if not track.closed and not 0.0 <= args.s <= track.length_m:
+        raise CliError(f"--s {args.s} m is outside the open track [0, {track.length_m:.2f}] m")
+    rng = np.random.default_rng(args.seed)
+    effects = {"off": Effects.off, "default": Effects,
+               "random": lambda: DomainRandomization().sample(rng)}[args.effects]()
+    x, y, h = (float(v) for v in track.pose(args.s, args.lateral))
+    pose = (x, y, h + args.heading)
+    renderer = Renderer()
+    scene = build_scene(track, effects, rng)
+    renderer.render(scene, pose, frame_seed=args.seed)  # warm-up (JIT, caches) for the timing
+    t0 = time.perf_counter()
+    frame = renderer.render(scene, pose, frame_seed=args.seed)
+    render_ms = 1000.0 * (time.perf_counter() - t0)
+    summary: dict[str, Any] = {
+        "track": track.name, "s_m": args.s, "lateral_m": args.lateral,
+        "heading_rad": args.heading, "pose": list(pose), "effects": asdict(effects),
+        "render_ms": render_ms, "out": _write_png(args.out, frame),
+    }
+    if args.truth is not None:
+        truth = frame_truth(track, renderer.camera, pose, s_hint_m=args.s)
+        picture = truth.colour()
+        for line in (truth.left_boundary_px, truth.right_boundary_px):
+            if len(line) > 1:
+                cv2.polylines(picture, [np.rint(line).astype(np.int32)], False, (0, 255, 0), 1,
+                              cv2.LINE_AA)
+        summary["truth"] = _write_png(args.truth, picture)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(f"rendered {track.name} at s = {args.s:.2f} m, lateral {args.lateral:+.2f} m, "
+              f"heading {args.heading:+.3f} rad in {render_ms:.2f} ms")
+        for key in ("out", "truth"):
+            if key in summary:
+                print(f"wrote {summary[key]}")
+    return 0
+
+
 def _emit(summary: dict[str, Any], as_json: bool) -> None:
     if as_json:
         print(json.dumps(summary))
@@ -168,6 +248,26 @@ def build_parser() -> argparse.ArgumentParser:
     lst = track_sub.add_parser("list", help="list the named tracks")
     lst.add_argument("--json", action="store_true", help="print one JSON object")
     lst.set_defaults(func=_cmd_track_list)
+
+    ren = sub.add_parser("render", help="render one camera frame of a track")
+    ren.add_argument("--track", required=True,
+                     help="named track, seed (generated track) or track file (.json)")
+    ren.add_argument("--s", type=float, required=True, help="arc length of the car [m]")
+    ren.add_argument("--lateral", type=float, default=-0.2,
+                     help="lateral offset from the centre line [m], left > 0 (default: the "
+                          "middle of the right lane)")
+    ren.add_argument("--heading", type=float, default=0.0,
+                     help="heading relative to the road [rad], left > 0")
+    ren.add_argument("--out", type=Path, required=True, help="frame PNG (752×480 grayscale)")
+    ren.add_argument("--truth", type=Path, help="ground-truth PNG (labels in colour, ego lane "
+                                                "boundaries in green)")
+    ren.add_argument("--effects", choices=("off", "default", "random"), default="default",
+                     help="photometric effects (random: drawn with --seed)")
+    ren.add_argument("--seed", type=_seed, default=0,
+                     help="seed of the random effects, the scene layout and the sensor noise")
+    ren.add_argument("--force", action="store_true", help="overwrite existing output files")
+    ren.add_argument("--json", action="store_true", help="print one JSON object")
+    ren.set_defaults(func=_cmd_render)
     return parser
 
 
