@@ -149,7 +149,11 @@ def _write_png(path: Path, image: np.ndarray) -> str:
 
 def _cmd_render(args: argparse.Namespace) -> int:
     from tfalda_sim.rendering import (
-        DomainRandomization, Effects, Renderer, build_scene, frame_truth,
+        DomainRandomization,
+        Effects,
+        Renderer,
+        build_scene,
+        frame_truth,
     )
 
     outputs = [p for p in (args.out, args.truth) if p is not None]

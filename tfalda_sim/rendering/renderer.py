@@ -122,22 +122,32 @@ def pixel_geometry(camera: FisheyeCamera, bonnet: Bonnet | None = None) -> Pixel
 
 
 _PAD = -8.0
-"""Map coordinate for padding pixels: outside the atlas and wall texture (reads 0)."""
+"""Map coordinate for padding pixels: outside the atlas (reads 0)."""
 
 
 @njit(cache=True, error_model="numpy")
-def _ground_maps(maps: np.ndarray, light_maps: np.ndarray, rows: np.ndarray, cols: np.ndarray,
-                 widths: np.ndarray, gx: np.ndarray, gy: np.ndarray, scale: np.ndarray,
-                 bias_x: np.ndarray, bias_y: np.ndarray, affine: np.ndarray, size_x: float,
-                 size_y: float, light_scale: float, with_light: bool) -> None:
-    """Atlas coordinates (pixel centres at integers) of the ground hits of the stacked
-    rows: stacked row t is image row ``rows[t]``, columns ``cols[t]`` … + ``widths[t]``."""
+def _atlas_maps(maps: np.ndarray, light_maps: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                widths: np.ndarray, coord_a: np.ndarray, coord_b: np.ndarray,
+                scale: np.ndarray, bias_x: np.ndarray, bias_y: np.ndarray, flags: np.ndarray,
+                affine: np.ndarray, size_x: float, size_y: float, wall_shift: float,
+                wall_cols: float, light_scale: float, with_light: bool) -> None:
+    """Atlas coordinates (pixel centres at integers) of the stacked rows: stacked row t is
+    image row ``rows[t]``, columns ``cols[t]`` … + ``widths[t]``.
+
+    Ground pixels (flag 1): ``(coord_a, coord_b)`` is the ground hit in the car frame [m],
+    moved to level-0 texels by ``affine`` and into the pixel's mip level by ``scale`` and
+    ``bias``. Other pixels: ``coord_a`` is the wall column at yaw 0, ``coord_b`` the atlas
+    row; the column turns with the car and wraps around the cylinder. Both are computed
+    and one is selected, so the loop has no branch and vectorises."""
     a00, a01, a02, a10, a11, a12 = (np.float32(affine[0]), np.float32(affine[1]),
                                     np.float32(affine[2]), np.float32(affine[3]),
                                     np.float32(affine[4]), np.float32(affine[5]))
     lo = np.float32(-2.0)
     hx = np.float32(size_x + 1.0)
     hy = np.float32(size_y + 1.0)
+    shift = np.float32(wall_shift)
+    wrap = np.float32(wall_cols)
+    one = np.float32(1.0)
     ls = np.float32(light_scale)
     half = np.float32(0.5)
     pad = np.float32(_PAD)
@@ -146,57 +156,42 @@ def _ground_maps(maps: np.ndarray, light_maps: np.ndarray, rows: np.ndarray, col
         r = rows[t]
         c0 = cols[t]
         width = widths[t]
-        gxr = gx[r, c0:c0 + width]
-        gyr = gy[r, c0:c0 + width]
+        ar = coord_a[r, c0:c0 + width]
+        br = coord_b[r, c0:c0 + width]
         sr = scale[r, c0:c0 + width]
         bxr = bias_x[r, c0:c0 + width]
         byr = bias_y[r, c0:c0 + width]
+        fr = flags[r, c0:c0 + width]
         m = maps[t].reshape(2 * span)  # interleaved (x, y): contiguous stores
         for j in range(width):
+            g = np.float32(fr[j] & 1)  # 0/1 factors blend exactly and keep this branch-free
             # Level-0 texel coordinates, clamped into the level's zero guard band.
-            x = min(max(a00 * gxr[j] + a01 * gyr[j] + a02, lo), hx)
-            y = min(max(a10 * gxr[j] + a11 * gyr[j] + a12, lo), hy)
-            m[2 * j] = x * sr[j] + bxr[j]
-            m[2 * j + 1] = y * sr[j] + byr[j]
+            x = min(max(a00 * ar[j] + a01 * br[j] + a02, lo), hx)
+            y = min(max(a10 * ar[j] + a11 * br[j] + a12, lo), hy)
+            w = ar[j] + shift  # both in [0, wrap): one subtraction wraps it
+            w = w - wrap * np.float32(w >= wrap)
+            m[2 * j] = g * (x * sr[j]) + (one - g) * w + bxr[j]
+            m[2 * j + 1] = g * (y * sr[j] + byr[j]) + (one - g) * br[j]
         for j in range(2 * width, 2 * span):
             m[j] = pad
         if with_light:
             lm = light_maps[t].reshape(2 * span)
             for j in range(width):
-                lm[2 * j] = min(max(a00 * gxr[j] + a01 * gyr[j] + a02, lo), hx) * ls - half
-                lm[2 * j + 1] = min(max(a10 * gxr[j] + a11 * gyr[j] + a12, lo), hy) * ls - half
+                lm[2 * j] = min(max(a00 * ar[j] + a01 * br[j] + a02, lo), hx) * ls - half
+                lm[2 * j + 1] = min(max(a10 * ar[j] + a11 * br[j] + a12, lo), hy) * ls - half
             for j in range(2 * width, 2 * span):
                 lm[j] = pad
 
 
 @njit(cache=True, error_model="numpy")
-def _wall_maps(out: np.ndarray, rows: np.ndarray, cols: np.ndarray, widths: np.ndarray,
-               static: np.ndarray, shift: float) -> None:
-    """Wall-texture coordinates of the stacked rows: the yaw-0 map shifted by the yaw."""
-    s = np.float32(shift)
-    pad = np.float32(_PAD)
-    span = out.shape[1]
-    full = static.shape[1]
-    for t in range(out.shape[0]):
-        o = out[t].reshape(2 * span)
-        st = static[rows[t]].reshape(2 * full)
-        c0 = cols[t]
-        for j in range(widths[t]):
-            o[2 * j] = st[2 * (c0 + j)] + s
-            o[2 * j + 1] = st[2 * (c0 + j) + 1]
-        for j in range(2 * widths[t], 2 * span):
-            o[j] = pad
-
-
-@njit(cache=True, error_model="numpy")
 def _combine(out: np.ndarray, rows: np.ndarray, cols: np.ndarray, widths: np.ndarray,
-             g_index: np.ndarray, s_index: np.ndarray, cov: np.ndarray, wall: np.ndarray,
-             light: np.ndarray, with_light: bool, overlay: np.ndarray, overlay_mask: np.ndarray,
-             overlay_x0: int, overlay_y0: int, with_overlay: bool, flags: np.ndarray,
-             gain: np.ndarray, sheen: np.ndarray, noise: np.ndarray, noise_offset: int,
-             image_width: int, params: np.ndarray) -> None:
-    """Final grey levels of the stacked rows. ``flags``: 1 ground, 2 bonnet, 4 ceiling.
-    ``g_index``/``s_index``: the row of ``cov``/``wall`` holding that row's ground/wall."""
+             sample_at: np.ndarray, tex: np.ndarray, light: np.ndarray, with_light: bool,
+             overlay: np.ndarray, overlay_mask: np.ndarray, overlay_x0: int, overlay_y0: int,
+             with_overlay: bool, flags: np.ndarray, gain: np.ndarray, sheen: np.ndarray,
+             noise: np.ndarray, noise_offset: int, image_width: int, params: np.ndarray) -> None:
+    """Final grey levels of the stacked rows from the sampled atlas ``tex`` (paint coverage
+    on the ground, wall texture elsewhere; stacked row t reads ``tex[sample_at[t]]``).
+    ``flags``: 1 ground, 2 bonnet, 4 ceiling."""
     mat = np.float32(params[0])
     k_line = np.float32((params[1] - params[0]) / 255.0)
     wall_k = np.float32(params[2] / 128.0)
@@ -218,8 +213,8 @@ def _combine(out: np.ndarray, rows: np.ndarray, cols: np.ndarray, widths: np.nda
         sh = sheen[r, c0:c0 + width]
         start = noise_offset + r * image_width + c0
         nz = noise[start:start + width]
-        cv = cov[g_index[t]]
-        wl = wall[s_index[t]]
+        tx = tex[sample_at[t]]
+        li = sample_at[t]
         o = out[t]
         o_row = r - overlay_y0
         o_hit = with_overlay and 0 <= o_row < overlay_mask.shape[0] and (
@@ -231,25 +226,26 @@ def _combine(out: np.ndarray, rows: np.ndarray, cols: np.ndarray, widths: np.nda
                 is_g = np.float32(f & 1)
                 is_b = np.float32((f >> 1) & 1)
                 is_c = np.float32((f >> 2) & 1)
-                w = is_c * ceiling + (one - is_c) * (wall_k * np.float32(wl[j]))
-                v = is_g * (mat + k_line * np.float32(cv[j]) + np.float32(sh[j])) + (
-                    one - is_g) * w
+                value = np.float32(tx[j])
+                w = is_c * ceiling + (one - is_c) * (wall_k * value)
+                v = is_g * (mat + k_line * value + np.float32(sh[j])) + (one - is_g) * w
                 v = is_b * (bonnet_dn + refl * v) + (one - is_b) * v
                 v = v * ga[j] + sigma * np.float32(nz[j])
                 o[j] = np.uint8(min(max(v, zero), top) + half)
             continue
-        li = g_index[t]
         for j in range(width):
             f = fl[j]
-            v = mat + k_line * np.float32(cv[j])
-            if with_light:
-                v = v * (np.float32(light[li, j, 0]) * inv255) + np.float32(light[li, j, 1])
+            value = np.float32(tx[j])
             if f & 1:
+                v = mat + k_line * value
+                if with_light:
+                    v = v * (np.float32(light[li, j, 0]) * inv255) + np.float32(
+                        light[li, j, 1])
                 v = v + np.float32(sh[j])
             elif f & 4:
                 v = ceiling
             else:
-                v = wall_k * np.float32(wl[j])
+                v = wall_k * value
             if o_hit and not f & 2:
                 oc = c0 + j - overlay_x0
                 if 0 <= oc < overlay_mask.shape[1] and overlay_mask[o_row, oc]:
@@ -264,13 +260,13 @@ def _combine(out: np.ndarray, rows: np.ndarray, cols: np.ndarray, widths: np.nda
 class _Layout:
     """Per-pixel constants for one atlas layout and hall (cached by the renderer)."""
 
-    scale: np.ndarray
-    bias_x: np.ndarray
+    coord_a: np.ndarray  # ground: car-frame x [m]; walls: wall column at yaw 0 [texels]
+    coord_b: np.ndarray  # ground: car-frame y [m]; walls: atlas row [texels]
+    scale: np.ndarray  # ground: 2^-level
+    bias_x: np.ndarray  # ground: level offset in the atlas; walls: the wall's atlas column
     bias_y: np.ndarray
     flags: np.ndarray  # uint8: 1 ground, 2 bonnet, 4 ceiling
-    wall_maps: np.ndarray  # (H, W, 2) wall-texture coordinates at yaw 0
-    ground_rows: tuple[int, int]
-    wall_rows: tuple[int, int]
+    sampled_rows: np.ndarray  # bool per image row: has a pixel that reads the atlas
 
 
 class Renderer:
@@ -284,8 +280,8 @@ class Renderer:
         self.camera = camera or FisheyeCamera.default()
         self.bonnet = bonnet or Bonnet()
         self.geometry = pixel_geometry(self.camera, self.bonnet)
-        self._layouts: dict[tuple, _Layout] = {}
-        self._effect_maps: dict[Effects, tuple[np.ndarray, np.ndarray]] = {}
+        self._layouts: dict[object, object] = {}
+        self._effect_maps: dict[Effects, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._scratch: dict[tuple, np.ndarray] = {}
         # A fixed table of N(0, 1) noise; each frame reads it at its own offset.
         bank = np.random.default_rng(0x7FA1DA).normal(0.0, 16.0, NOISE_BANK_SIZE)
@@ -297,39 +293,48 @@ class Renderer:
 
     # ------------------------------------------------------------------ caches
     def _layout(self, scene: Scene) -> _Layout:
+        cached = self._layouts.get(id(scene))
+        if cached is not None and cached[0] is scene:
+            return cached[1]
         key = (scene.resolution_m, scene.level_origin.tobytes(), scene.hall,
-               scene.wall_texture.shape)
-        if key in self._layouts:
-            return self._layouts[key]
+               scene.wall_origin, scene.wall_size)
+        layout = self._layouts.get(key)
+        if layout is None:
+            layout = self._build_layout(scene)
+            if len(self._layouts) > 16:
+                self._layouts.clear()
+            self._layouts[key] = layout
+        self._layouts[id(scene)] = (scene, layout)
+        return layout
+
+    def _build_layout(self, scene: Scene) -> _Layout:
         g = self.geometry
+        hall = scene.hall
+        is_ground = g.rho < hall.distance_m
+        z = self.camera.mount.height_m + hall.distance_m * g.tan_el.astype(np.float64)
+        ceiling = ~is_ground & (z >= hall.height_m + 0.05)
+        flags = (is_ground.astype(np.uint8) | (g.bonnet << 1)
+                 | (ceiling.astype(np.uint8) << 2)).astype(np.uint8)
         level = np.clip(np.rint(g.log2_fp - math.log2(scene.resolution_m)), 0,
                         scene.levels - 1).astype(np.int64)
-        scale = (0.5 ** level).astype(np.float32)
+        level_scale = 0.5 ** level
         origin = scene.level_origin
-        bias_x = (0.5 * scale - 0.5 + origin[level, 0]).astype(np.float32)
-        bias_y = (0.5 * scale - 0.5 + origin[level, 1]).astype(np.float32)
-        hall = scene.hall
-        is_ground = (g.rho < hall.distance_m).astype(np.uint8)
-        z = self.camera.mount.height_m + hall.distance_m * g.tan_el.astype(np.float64)
-        tex_rows = scene.wall_texture.shape[0]
-        wall_x = np.mod(g.azimuth.astype(np.float64), 2 * math.pi) * (
+        wall_rows = scene.wall_size[1]
+        wall_col = np.mod(g.azimuth.astype(np.float64), 2 * math.pi) * (
             hall.distance_m / WALL_TEXEL_M)
-        wall_y = np.clip(z / WALL_TEXEL_M, 0.0, tex_rows - 1.0)
-        wall_maps = np.dstack([wall_x, wall_y]).astype(np.float32)
-        ceiling = (is_ground == 0) & (z >= hall.height_m + 0.05)
-        flags = (is_ground | (g.bonnet << 1) | (ceiling.astype(np.uint8) << 2)).astype(np.uint8)
-        rows_ground = np.flatnonzero(is_ground.any(axis=1))
-        rows_wall = np.flatnonzero(((is_ground == 0) & ~ceiling).any(axis=1))
-        layout = _Layout(
-            scale=scale, bias_x=bias_x, bias_y=bias_y, flags=flags, wall_maps=wall_maps,
-            ground_rows=(int(rows_ground[0]), int(rows_ground[-1]) + 1) if len(rows_ground)
-            else (0, 0),
-            wall_rows=(int(rows_wall[0]), int(rows_wall[-1]) + 1) if len(rows_wall) else (0, 0),
+        wall_row = np.clip(z / WALL_TEXEL_M, 0.0, wall_rows - 1.0) + scene.wall_origin[1]
+        f32 = np.float32
+        return _Layout(
+            coord_a=np.where(is_ground, g.gx, wall_col).astype(f32),
+            coord_b=np.where(is_ground, g.gy, np.where(ceiling, _PAD, wall_row)).astype(f32),
+            scale=np.where(is_ground, level_scale, 0.0).astype(f32),
+            bias_x=np.where(is_ground, 0.5 * level_scale - 0.5 + origin[level, 0],
+                            np.where(ceiling, _PAD, scene.wall_origin[0])).astype(f32),
+            bias_y=np.where(is_ground, 0.5 * level_scale - 0.5 + origin[level, 1], 0.0
+                            ).astype(f32),
+            flags=flags,
+            sampled_rows=~np.all(flags == 4, axis=1),
         )
-        if len(self._layouts) > 8:
-            self._layouts.clear()
-        self._layouts[key] = layout
-        return layout
 
     def _buffer(self, name: str, shape: tuple[int, ...], dtype: type) -> np.ndarray:
         """A reusable scratch array (fresh large arrays cost page faults every frame)."""
@@ -341,15 +346,18 @@ class Renderer:
             buf = self._scratch[key] = np.empty(shape, dtype)
         return buf
 
-    def _maps_for(self, fx: Effects) -> tuple[np.ndarray, np.ndarray]:
-        """Per-pixel gain (exposure × vignetting) and floor sheen [DN] for ``fx``."""
+    def _maps_for(self, fx: Effects) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per-pixel gain (exposure × vignetting), floor sheen [DN] and the scalar
+        parameters of the combine pass, for ``fx``."""
         if fx not in self._effect_maps:
             g = self.geometry
             gain = (fx.gain * (1.0 - fx.vignetting * g.radius2)).astype(np.float32)
             sheen = np.clip(np.rint(fx.glare * g.sheen), 0, 255).astype(np.uint8)
+            params = np.array([fx.mat_dn, fx.line_dn, fx.wall_dn, fx.bonnet_dn,
+                               fx.bonnet_reflectivity, fx.noise_dn, CEILING_FACTOR * fx.wall_dn])
             if len(self._effect_maps) > 16:
                 self._effect_maps.clear()
-            self._effect_maps[fx] = (gain, sheen)
+            self._effect_maps[fx] = (gain, sheen, params)
         return self._effect_maps[fx]
 
     # ------------------------------------------------------------------ render
@@ -382,73 +390,53 @@ class Renderer:
                 raise ValueError(f"window {win} is not inside the {width}×{height} image")
         fx = scene.effects
         layout = self._layout(scene)
-        gain, sheen = self._maps_for(fx)
-        # Stacked rows: every row of every window, in order.
-        rows = np.concatenate([np.arange(wy0, wy0 + wh) for _, wy0, _, wh in boxes])
-        cols = np.concatenate([np.full(wh, wx0) for wx0, _, _, wh in boxes])
-        widths = np.concatenate([np.full(wh, ww) for _, _, ww, wh in boxes])
+        gain, sheen, params = self._maps_for(fx)
+        rows, cols, widths, sample_at, sample_idx = self._stack(tuple(boxes), layout)
         span = int(widths.max())
-        g_rows = np.flatnonzero((rows >= layout.ground_rows[0]) & (rows < layout.ground_rows[1]))
-        s_rows = np.flatnonzero((rows >= layout.wall_rows[0]) & (rows < layout.wall_rows[1]))
-        n_g, n_s = len(g_rows), len(s_rows)
-        g_index = np.full(len(rows), n_g, np.int64)  # row n_g of ``cov`` stays 0
-        g_index[g_rows] = np.arange(n_g)
-        s_index = np.full(len(rows), n_s, np.int64)
-        s_index[s_rows] = np.arange(n_s)
+        n = len(rows)
+        n_s = len(sample_idx)  # stacked rows that read the atlas (not all ceiling)
 
         blur_m = speed_m_s * fx.motion_blur_s
         shifts = np.linspace(0.0, blur_m, MOTION_BLUR_SAMPLES) if blur_m > 0 else np.zeros(1)
         blur = len(shifts) > 1
-        cov = self._buffer("cov", (n_g + 1, span), np.float32 if blur else np.uint8)
-        cov[n_g] = 0
-        if blur:
-            cov.fill(0.0)  # stale float bytes may be NaN, and 0 × NaN is no 0
         with_light = scene.light is not None
-        light = self._buffer("light", (n_g + 1, span, 2) if with_light else (1, 1, 2), np.uint8)
-        if n_g:
-            maps = self._buffer("maps", (n_g, span, 2), np.float32)
-            light_maps = self._buffer("light_maps", (n_g, span, 2) if with_light else (1, 1, 2),
-                                      np.float32)
-            sample = self._buffer("sample", (n_g, span), np.uint8)
-            rg, cg, wg = rows[g_rows], cols[g_rows], widths[g_rows]
-            for k, back in enumerate(shifts):
-                affine = self._affine(scene, x - back * math.cos(yaw), y - back * math.sin(yaw),
-                                      yaw)
-                _ground_maps(maps, light_maps, rg, cg, wg, self.geometry.gx, self.geometry.gy,
-                             layout.scale, layout.bias_x, layout.bias_y, affine,
-                             float(scene.level0_size[0]), float(scene.level0_size[1]),
-                             scene.resolution_m / LIGHT_RES_M, with_light and k == 0)
-                target = sample if blur else cov[:n_g]
-                cv2.remap(scene.atlas, maps, None, cv2.INTER_LINEAR, dst=target,
-                          borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-                if blur:
-                    cov[:n_g] += sample.astype(np.float32) / len(shifts)
-                if with_light and k == 0:
-                    cv2.remap(scene.light, light_maps, None, cv2.INTER_LINEAR, dst=light[:n_g],
-                              borderMode=cv2.BORDER_REPLICATE)
-        wall = self._buffer("wall", (n_s + 1, span), np.uint8)
-        wall[n_s] = 0
-        if n_s:
-            wmaps = self._buffer("wall_maps", (n_s, span, 2), np.float32)
-            _wall_maps(wmaps, rows[s_rows], cols[s_rows], widths[s_rows], layout.wall_maps,
-                       (yaw % (2 * math.pi)) * (scene.hall.distance_m / WALL_TEXEL_M))
-            # Nearest texel: at the walls' distance a pixel spans about one texel.
-            cv2.remap(scene.wall_texture, wmaps, None, cv2.INTER_NEAREST, dst=wall[:n_s],
-                      borderMode=cv2.BORDER_WRAP)
+        maps = self._buffer("maps", (n_s, span, 2), np.float32)
+        light_maps = self._buffer("light_maps", (n_s, span, 2) if with_light else (1, 1, 2),
+                                  np.float32)
+        light = self._buffer("light", (n_s + 1, span, 2) if with_light else (1, 1, 2), np.uint8)
+        tex = self._buffer("tex", (n_s + 1, span), np.uint8)  # last row: all-ceiling rows
+        tex[n_s] = 0
+        if blur:
+            total = self._buffer("tex_sum", (n_s + 1, span), np.float32)
+            total.fill(0.0)
+        wall_shift = (yaw % (2 * math.pi)) * (scene.hall.distance_m / WALL_TEXEL_M)
+        for k, back in enumerate(shifts):
+            affine = self._affine(scene, x - back * math.cos(yaw), y - back * math.sin(yaw), yaw)
+            if not n_s:
+                break
+            _atlas_maps(maps, light_maps, rows[sample_idx], cols[sample_idx],
+                        widths[sample_idx], layout.coord_a, layout.coord_b,
+                        layout.scale, layout.bias_x, layout.bias_y, layout.flags, affine,
+                        float(scene.level0_size[0]), float(scene.level0_size[1]), wall_shift,
+                        float(scene.wall_size[0]), scene.resolution_m / LIGHT_RES_M,
+                        with_light and k == 0)
+            cv2.remap(scene.atlas, maps, None, cv2.INTER_LINEAR, dst=tex[:n_s],
+                      borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+            if blur:
+                total += tex
+            if with_light and k == 0:
+                cv2.remap(scene.light, light_maps, None, cv2.INTER_LINEAR, dst=light[:n_s],
+                          borderMode=cv2.BORDER_REPLICATE)
+        sampled = total * np.float32(1.0 / len(shifts)) if blur else tex
         faces = obstacle_faces(self.camera, scene.boxes, (x, y, yaw), fx.line_dn,
                                scene.hall.distance_m)
         drawn = _draw_faces(faces, width, height)
         (ox0, oy0), overlay, mask = drawn if drawn is not None else (
             (0, 0), np.zeros((1, 1), np.float32), np.zeros((1, 1), np.uint8))
-        # Same noise offset for every window of a frame: noise is a function of the pixel.
-        noise_offset = int(np.random.default_rng(frame_seed & 0xFFFFFFFF).integers(
-            NOISE_BANK_SIZE - width * height))
-        params = np.array([fx.mat_dn, fx.line_dn, fx.wall_dn, fx.bonnet_dn,
-                           fx.bonnet_reflectivity, fx.noise_dn, CEILING_FACTOR * fx.wall_dn])
-        stacked = np.empty((len(rows), span), np.uint8)
-        _combine(stacked, rows, cols, widths, g_index, s_index, cov, wall, light, with_light,
-                 overlay, mask, ox0, oy0, drawn is not None, layout.flags, gain, sheen,
-                 self._noise, noise_offset, width, params)
+        stacked = np.empty((n, span), np.uint8)
+        _combine(stacked, rows, cols, widths, sample_at, sampled, light, with_light, overlay,
+                 mask, ox0, oy0, drawn is not None, layout.flags, gain, sheen, self._noise,
+                 _noise_offset(frame_seed, width * height), width, params)
         out = []
         start = 0
         for _, _, ww, wh in boxes:
@@ -457,6 +445,27 @@ class Renderer:
             start += wh
         return out
 
+    def _stack(self, boxes: tuple, layout: _Layout) -> tuple[np.ndarray, ...]:
+        """Stacked rows of the windows (every row of every window, in order): image row,
+        first column, width, the row of the sampled atlas each reads (the last one for
+        rows of nothing but ceiling) and which stacked rows read the atlas."""
+        key = ("stack", boxes, id(layout))
+        cached = self._scratch.get(key)
+        if cached is not None and cached[0] is layout:
+            return cached[1]
+        heights = np.array([wh for _, _, _, wh in boxes])
+        rows = np.concatenate([np.arange(wy0, wy0 + wh) for _, wy0, _, wh in boxes])
+        cols = np.repeat(np.array([wx0 for wx0, _, _, _ in boxes]), heights)
+        widths = np.repeat(np.array([ww for _, _, ww, _ in boxes]), heights)
+        sample_idx = np.flatnonzero(layout.sampled_rows[rows])
+        sample_at = np.full(len(rows), len(sample_idx), np.int64)
+        sample_at[sample_idx] = np.arange(len(sample_idx))
+        result = (rows, cols, widths, sample_at, sample_idx)
+        if len(self._scratch) > 64:
+            self._scratch.clear()
+        self._scratch[key] = (layout, result)
+        return result
+
     def _affine(self, scene: Scene, x: float, y: float, yaw: float) -> np.ndarray:
         """Car-frame ground point → level-0 texel coordinates (centres at integers)."""
         c, s = math.cos(yaw), math.sin(yaw)
@@ -464,6 +473,15 @@ class Renderer:
         ox, oy = scene.origin
         return np.array([c * inv, -s * inv, (x - ox) * inv - 0.5,
                          -s * inv, -c * inv, (oy - y) * inv - 0.5])
+
+
+def _noise_offset(frame_seed: int, pixels: int) -> int:
+    """Where a frame reads the noise bank: a splitmix64 hash of its seed. The same offset
+    for every window of a frame keeps the noise a function of the pixel."""
+    z = (frame_seed + 0x9E3779B97F4A7C15) & 0xFFFFFFFFFFFFFFFF
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & 0xFFFFFFFFFFFFFFFF
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & 0xFFFFFFFFFFFFFFFF
+    return (z ^ (z >> 31)) % (NOISE_BANK_SIZE - pixels)
 
 
 def obstacle_faces(camera: FisheyeCamera, boxes: np.ndarray, pose: tuple[float, float, float],

@@ -51,13 +51,14 @@ class Scene:
     track: Track
     effects: Effects
     hall: Hall
-    atlas: np.ndarray  # uint8: all mip levels of the (worn) marking map, side by side
+    atlas: np.ndarray  # uint8: all mip levels of the (worn) marking map and the wall texture
     level_origin: np.ndarray  # (L, 2) float32: atlas (x, y) of each level's texel (0, 0)
+    wall_origin: tuple[int, int]  # atlas (x, y) of the wall texture's texel (0, 0)
+    wall_size: tuple[int, int]  # wall texture (cols around the cylinder, rows up) [texels]
     level0_size: tuple[int, int]  # level 0 (cols, rows) [texels]
     resolution_m: float  # level-0 texel [m]
     origin: tuple[float, float]  # world (x, y) of level 0's top-left corner [m]
     light: np.ndarray | None  # (h, w, 2) uint8: shadow gain ×255, glare [DN]; None: no light
-    wall_texture: np.ndarray  # (rows, cols) uint8 around the cylinder, row 0 at the floor
     boxes: np.ndarray  # (n, 8, 3) obstacle corners [m]: 4 on the ground, 4 on top
 
     @property
@@ -65,18 +66,23 @@ class Scene:
         return len(self.level_origin)
 
 
-def _atlas(level0: np.ndarray, min_size: int = 8) -> tuple[np.ndarray, np.ndarray]:
-    """Mip levels (2×2 box averages) packed into one image: level 0 on the left, the
-    others stacked in a column to its right, each inside a zero guard band."""
+def _atlas(level0: np.ndarray, wall: np.ndarray, min_size: int = 8
+           ) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
+    """Mip levels (2×2 box averages) and the wall texture packed into one image: level 0 on
+    the left, the other levels and then the walls stacked in a column to its right, each
+    inside a zero guard band. The wall texture gets its first column repeated after its
+    last, so bilinear taps wrap around the cylinder."""
     levels = [level0]
     while min(levels[-1].shape) // 2 >= min_size and len(levels) < 10:
         prev = levels[-1]
         rows, cols = prev.shape[0] // 2 * 2, prev.shape[1] // 2 * 2
         levels.append(cv2.resize(prev[:rows, :cols], (cols // 2, rows // 2),
                                  interpolation=cv2.INTER_AREA))
+    wall = np.concatenate([wall, wall[:, :1]], axis=1)
     g = ATLAS_GUARD
-    right_w = max(lv.shape[1] for lv in levels[1:]) + 2 * g if len(levels) > 1 else 0
-    right_h = sum(lv.shape[0] + 2 * g for lv in levels[1:])
+    column = [*levels[1:], wall]
+    right_w = max(t.shape[1] for t in column) + 2 * g
+    right_h = sum(t.shape[0] + 2 * g for t in column)
     height = max(level0.shape[0] + 2 * g, right_h)
     width = level0.shape[1] + 2 * g + right_w
     if max(height, width) >= 32767:
@@ -86,11 +92,11 @@ def _atlas(level0: np.ndarray, min_size: int = 8) -> tuple[np.ndarray, np.ndarra
     origins = [(g, g)]
     atlas[g:g + level0.shape[0], g:g + level0.shape[1]] = level0
     x, y = level0.shape[1] + 3 * g, g
-    for lv in levels[1:]:
-        atlas[y:y + lv.shape[0], x:x + lv.shape[1]] = lv
+    for tex in column:
+        atlas[y:y + tex.shape[0], x:x + tex.shape[1]] = tex
         origins.append((x, y))
-        y += lv.shape[0] + 2 * g
-    return atlas, np.array(origins, np.float32)
+        y += tex.shape[0] + 2 * g
+    return atlas, np.array(origins[:-1], np.float32), origins[-1]
 
 
 def _blobs(rng: np.random.Generator, shape: tuple[int, int], count: int,
@@ -157,7 +163,8 @@ def build_scene(track: Track, effects: Effects | None = None,
     level0 = m.intensity
     if fx.wear > 0:
         level0 = np.rint(level0 * _wear(rng, level0.shape, fx.wear)).astype(np.uint8)
-    atlas, origins = _atlas(level0)
+    wall = _wall_texture(rng, hall)
+    atlas, origins, wall_origin = _atlas(level0, wall)
     light = None
     if fx.shadows > 0 or fx.glare_spots > 0:
         rows = max(1, int(math.ceil(level0.shape[0] * m.resolution_m / LIGHT_RES_M)))
@@ -174,5 +181,6 @@ def build_scene(track: Track, effects: Effects | None = None,
     return Scene(
         track=track, effects=fx, hall=hall, atlas=atlas, level_origin=origins,
         level0_size=(level0.shape[1], level0.shape[0]), resolution_m=m.resolution_m,
-        origin=m.origin_m, light=light, wall_texture=_wall_texture(rng, hall), boxes=boxes,
+        origin=m.origin_m, light=light, wall_origin=wall_origin,
+        wall_size=(wall.shape[1], wall.shape[0]), boxes=boxes,
     )
