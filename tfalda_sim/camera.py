@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -63,6 +64,10 @@ class CameraMount:
 
     def rotation(self) -> np.ndarray:
         """3×3 rotation taking car-frame directions to camera-frame directions."""
+        return self._rotation.copy()
+
+    @cached_property
+    def _rotation(self) -> np.ndarray:
         base = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
         cp, sp = math.cos(self.pitch_rad), math.sin(self.pitch_rad)
         cy, sy = math.cos(self.yaw_rad), math.sin(self.yaw_rad)
@@ -74,6 +79,10 @@ class CameraMount:
 
     def position(self) -> np.ndarray:
         """Camera centre in the car frame [m]."""
+        return self._position.copy()
+
+    @cached_property
+    def _position(self) -> np.ndarray:
         return np.array([self.forward_m, self.lateral_m, self.height_m])
 
 
@@ -168,7 +177,7 @@ class FisheyeCamera:
     def car_to_camera(self, points_car: np.ndarray) -> np.ndarray:
         """``(N, 3)`` car-frame points [m] → camera frame [m]."""
         p = np.asarray(points_car, dtype=np.float64)
-        return (p - self.mount.position()) @ self.mount.rotation().T
+        return (p - self.mount._position) @ self.mount._rotation.T
 
     def world_to_camera(self, points_world: np.ndarray, car_pose: tuple[float, float, float]
                         ) -> np.ndarray:
@@ -176,9 +185,11 @@ class FisheyeCamera:
         x, y, yaw = car_pose
         p = np.asarray(points_world, dtype=np.float64)
         c, s = math.cos(yaw), math.sin(yaw)
-        dx, dy = p[:, 0] - x, p[:, 1] - y
-        car = np.column_stack([c * dx + s * dy, -s * dx + c * dy, p[:, 2]])
-        return self.car_to_camera(car)
+        # World → car (rotate by −yaw about the car) → camera, as one affine map.
+        world_to_car = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        rot = self.mount._rotation @ world_to_car
+        origin = np.array([x, y, 0.0]) + world_to_car.T @ self.mount._position
+        return (p - origin) @ rot.T
 
     def project_world(self, points_world: np.ndarray, car_pose: tuple[float, float, float]
                       ) -> np.ndarray:

@@ -127,12 +127,14 @@ _PAD = -8.0
 
 @njit(cache=True, error_model="numpy")
 def _atlas_maps(maps: np.ndarray, light_maps: np.ndarray, rows: np.ndarray, cols: np.ndarray,
-                widths: np.ndarray, coord_a: np.ndarray, coord_b: np.ndarray,
-                scale: np.ndarray, bias_x: np.ndarray, bias_y: np.ndarray, flags: np.ndarray,
-                affine: np.ndarray, size_x: float, size_y: float, wall_shift: float,
-                wall_cols: float, light_scale: float, with_light: bool) -> None:
-    """Atlas coordinates (pixel centres at integers) of the stacked rows: stacked row t is
-    image row ``rows[t]``, columns ``cols[t]`` … + ``widths[t]``.
+                widths: np.ndarray, offsets: np.ndarray, coord_a: np.ndarray,
+                coord_b: np.ndarray, scale: np.ndarray, bias_x: np.ndarray,
+                bias_y: np.ndarray, flags: np.ndarray, affine: np.ndarray, size_x: float,
+                size_y: float, wall_shift: float, wall_cols: float, light_scale: float,
+                with_light: bool) -> None:
+    """Atlas coordinates (pixel centres at integers) of the requested row pieces, packed
+    back to back: piece t is image row ``rows[t]``, columns ``cols[t]`` … + ``widths[t]``,
+    written to the flat, interleaved (x, y) ``maps`` from pixel ``offsets[t]`` on.
 
     Ground pixels (flag 1): ``(coord_a, coord_b)`` is the ground hit in the car frame [m],
     moved to level-0 texels by ``affine`` and into the pixel's mip level by ``scale`` and
@@ -151,8 +153,8 @@ def _atlas_maps(maps: np.ndarray, light_maps: np.ndarray, rows: np.ndarray, cols
     ls = np.float32(light_scale)
     half = np.float32(0.5)
     pad = np.float32(_PAD)
-    span = maps.shape[1]
-    for t in range(maps.shape[0]):
+    end = 0
+    for t in range(len(rows)):
         r = rows[t]
         c0 = cols[t]
         width = widths[t]
@@ -162,7 +164,8 @@ def _atlas_maps(maps: np.ndarray, light_maps: np.ndarray, rows: np.ndarray, cols
         bxr = bias_x[r, c0:c0 + width]
         byr = bias_y[r, c0:c0 + width]
         fr = flags[r, c0:c0 + width]
-        m = maps[t].reshape(2 * span)  # interleaved (x, y): contiguous stores
+        start = 2 * offsets[t]
+        m = maps[start:start + 2 * width]  # a slice of a flat view: no per-row reshape
         for j in range(width):
             g = np.float32(fr[j] & 1)  # 0/1 factors blend exactly and keep this branch-free
             # Level-0 texel coordinates, clamped into the level's zero guard band.
@@ -172,25 +175,29 @@ def _atlas_maps(maps: np.ndarray, light_maps: np.ndarray, rows: np.ndarray, cols
             w = w - wrap * np.float32(w >= wrap)
             m[2 * j] = g * (x * sr[j]) + (one - g) * w + bxr[j]
             m[2 * j + 1] = g * (y * sr[j] + byr[j]) + (one - g) * br[j]
-        for j in range(2 * width, 2 * span):
-            m[j] = pad
         if with_light:
-            lm = light_maps[t].reshape(2 * span)
+            lm = light_maps[start:start + 2 * width]
             for j in range(width):
                 lm[2 * j] = min(max(a00 * ar[j] + a01 * br[j] + a02, lo), hx) * ls - half
                 lm[2 * j + 1] = min(max(a10 * ar[j] + a11 * br[j] + a12, lo), hy) * ls - half
-            for j in range(2 * width, 2 * span):
-                lm[j] = pad
+        end = max(end, start + 2 * width)
+    for j in range(end, len(maps)):  # the tail that rounds the buffer up: reads 0
+        maps[j] = pad
+    if with_light:
+        for j in range(end, len(light_maps)):
+            light_maps[j] = pad
 
 
 @njit(cache=True, error_model="numpy")
-def _combine(out: np.ndarray, rows: np.ndarray, cols: np.ndarray, widths: np.ndarray,
-             sample_at: np.ndarray, tex: np.ndarray, light: np.ndarray, with_light: bool,
+def _combine(out: np.ndarray, out_offsets: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+             widths: np.ndarray, tex_offsets: np.ndarray, tex: np.ndarray, light: np.ndarray,
+             with_light: bool,
              overlay: np.ndarray, overlay_mask: np.ndarray, overlay_x0: int, overlay_y0: int,
              with_overlay: bool, flags: np.ndarray, gain: np.ndarray, sheen: np.ndarray,
              noise: np.ndarray, noise_offset: int, image_width: int, params: np.ndarray) -> None:
-    """Final grey levels of the stacked rows from the sampled atlas ``tex`` (paint coverage
-    on the ground, wall texture elsewhere; stacked row t reads ``tex[sample_at[t]]``).
+    """Final grey levels of the row pieces, written to the flat ``out`` from
+    ``out_offsets[t]`` on, from the sampled atlas ``tex`` (paint coverage on the ground, wall
+    texture elsewhere) read from ``tex_offsets[t]`` on (flat ``light`` alike).
     ``flags``: 1 ground, 2 bonnet, 4 ceiling."""
     mat = np.float32(params[0])
     k_line = np.float32((params[1] - params[0]) / 255.0)
@@ -204,7 +211,7 @@ def _combine(out: np.ndarray, rows: np.ndarray, cols: np.ndarray, widths: np.nda
     top = np.float32(255.0)
     half = np.float32(0.5)
     inv255 = np.float32(1.0 / 255.0)
-    for t in range(out.shape[0]):
+    for t in range(len(rows)):
         r = rows[t]
         c0 = cols[t]
         width = widths[t]
@@ -213,9 +220,9 @@ def _combine(out: np.ndarray, rows: np.ndarray, cols: np.ndarray, widths: np.nda
         sh = sheen[r, c0:c0 + width]
         start = noise_offset + r * image_width + c0
         nz = noise[start:start + width]
-        tx = tex[sample_at[t]]
-        li = sample_at[t]
-        o = out[t]
+        li = tex_offsets[t]
+        tx = tex[li:li + width]
+        o = out[out_offsets[t]:out_offsets[t] + width]
         o_row = r - overlay_y0
         o_hit = with_overlay and 0 <= o_row < overlay_mask.shape[0] and (
             c0 < overlay_x0 + overlay_mask.shape[1] and c0 + width > overlay_x0)
@@ -239,8 +246,8 @@ def _combine(out: np.ndarray, rows: np.ndarray, cols: np.ndarray, widths: np.nda
             if f & 1:
                 v = mat + k_line * value
                 if with_light:
-                    v = v * (np.float32(light[li, j, 0]) * inv255) + np.float32(
-                        light[li, j, 1])
+                    v = v * (np.float32(light[2 * (li + j)]) * inv255) + np.float32(
+                        light[2 * (li + j) + 1])
                 v = v + np.float32(sh[j])
             elif f & 4:
                 v = ceiling
@@ -254,6 +261,32 @@ def _combine(out: np.ndarray, rows: np.ndarray, cols: np.ndarray, widths: np.nda
                 v = bonnet_dn + refl * v
             v = v * ga[j] + sigma * np.float32(nz[j])
             o[j] = np.uint8(min(max(v, zero), top) + half)
+
+
+_PACK = 1024
+"""Pixels per row of the packed buffers handed to ``cv2.remap``."""
+
+
+@dataclass(frozen=True)
+class _Stack:
+    """The requested windows' row pieces, packed back to back (no padding): piece t is
+    image row ``rows[t]``, columns ``cols[t]`` … + ``widths[t]``; its output starts at
+    ``out_offsets[t]``, its atlas sample at ``tex_offsets[t]``. The ``s_*`` arrays list the
+    pieces that sample the atlas (rows of nothing but ceiling do not)."""
+
+    rows: np.ndarray
+    cols: np.ndarray
+    widths: np.ndarray
+    out_offsets: np.ndarray
+    tex_offsets: np.ndarray
+    s_rows: np.ndarray
+    s_cols: np.ndarray
+    s_widths: np.ndarray
+    s_offsets: np.ndarray
+    tex_rows: int
+    zero_len: int
+    out_len: int
+    window_offsets: list[int]
 
 
 @dataclass(frozen=True)
@@ -391,64 +424,59 @@ class Renderer:
         fx = scene.effects
         layout = self._layout(scene)
         gain, sheen, params = self._maps_for(fx)
-        rows, cols, widths, sample_at, sample_idx = self._stack(tuple(boxes), layout)
-        span = int(widths.max())
-        n = len(rows)
-        n_s = len(sample_idx)  # stacked rows that read the atlas (not all ceiling)
-
+        st = self._stack(tuple(boxes), layout)
         blur_m = speed_m_s * fx.motion_blur_s
         shifts = np.linspace(0.0, blur_m, MOTION_BLUR_SAMPLES) if blur_m > 0 else np.zeros(1)
         blur = len(shifts) > 1
         with_light = scene.light is not None
-        maps = self._buffer("maps", (n_s, span, 2), np.float32)
-        light_maps = self._buffer("light_maps", (n_s, span, 2) if with_light else (1, 1, 2),
-                                  np.float32)
-        light = self._buffer("light", (n_s + 1, span, 2) if with_light else (1, 1, 2), np.uint8)
-        tex = self._buffer("tex", (n_s + 1, span), np.uint8)  # last row: all-ceiling rows
-        tex[n_s] = 0
+        n_tex = st.tex_rows * _PACK  # sampled pixels, rounded up to whole rows of _PACK
+        maps = self._buffer("maps", (st.tex_rows, _PACK, 2), np.float32)
+        light_maps = self._buffer("light_maps", (st.tex_rows, _PACK, 2) if with_light
+                                  else (1, 1, 2), np.float32)
+        light = self._buffer("light", (n_tex + st.zero_len, 2) if with_light else (1, 2),
+                             np.uint8)
+        tex = self._buffer("tex", (n_tex + st.zero_len,), np.uint8)
+        tex[n_tex:] = 0  # read by the rows that show nothing but ceiling
         if blur:
-            total = self._buffer("tex_sum", (n_s + 1, span), np.float32)
+            total = self._buffer("tex_sum", (n_tex + st.zero_len,), np.float32)
             total.fill(0.0)
         wall_shift = (yaw % (2 * math.pi)) * (scene.hall.distance_m / WALL_TEXEL_M)
         for k, back in enumerate(shifts):
-            affine = self._affine(scene, x - back * math.cos(yaw), y - back * math.sin(yaw), yaw)
-            if not n_s:
+            if not st.tex_rows:
                 break
-            _atlas_maps(maps, light_maps, rows[sample_idx], cols[sample_idx],
-                        widths[sample_idx], layout.coord_a, layout.coord_b,
+            affine = self._affine(scene, x - back * math.cos(yaw), y - back * math.sin(yaw), yaw)
+            _atlas_maps(maps.reshape(-1), light_maps.reshape(-1), st.s_rows, st.s_cols,
+                        st.s_widths, st.s_offsets, layout.coord_a, layout.coord_b,
                         layout.scale, layout.bias_x, layout.bias_y, layout.flags, affine,
                         float(scene.level0_size[0]), float(scene.level0_size[1]), wall_shift,
                         float(scene.wall_size[0]), scene.resolution_m / LIGHT_RES_M,
                         with_light and k == 0)
-            cv2.remap(scene.atlas, maps, None, cv2.INTER_LINEAR, dst=tex[:n_s],
+            cv2.remap(scene.atlas, maps, None, cv2.INTER_LINEAR,
+                      dst=tex[:n_tex].reshape(st.tex_rows, _PACK),
                       borderMode=cv2.BORDER_CONSTANT, borderValue=0)
             if blur:
                 total += tex
             if with_light and k == 0:
-                cv2.remap(scene.light, light_maps, None, cv2.INTER_LINEAR, dst=light[:n_s],
+                cv2.remap(scene.light, light_maps, None, cv2.INTER_LINEAR,
+                          dst=light[:n_tex].reshape(st.tex_rows, _PACK, 2),
                           borderMode=cv2.BORDER_REPLICATE)
         sampled = total * np.float32(1.0 / len(shifts)) if blur else tex
-        faces = obstacle_faces(self.camera, scene.boxes, (x, y, yaw), fx.line_dn,
-                               scene.hall.distance_m)
+        full_frame = len(boxes) == 1 and boxes[0] == (0, 0, width, height)
+        faces = obstacle_faces(self.camera, self._box_faces(scene), (x, y, yaw), fx.line_dn,
+                               scene.hall.distance_m, None if full_frame else boxes)
         drawn = _draw_faces(faces, width, height)
         (ox0, oy0), overlay, mask = drawn if drawn is not None else (
             (0, 0), np.zeros((1, 1), np.float32), np.zeros((1, 1), np.uint8))
-        stacked = np.empty((n, span), np.uint8)
-        _combine(stacked, rows, cols, widths, sample_at, sampled, light, with_light, overlay,
-                 mask, ox0, oy0, drawn is not None, layout.flags, gain, sheen, self._noise,
+        out = np.empty(st.out_len, np.uint8)
+        _combine(out, st.out_offsets, st.rows, st.cols, st.widths, st.tex_offsets, sampled,
+                 light.reshape(-1), with_light, overlay, mask, ox0, oy0, drawn is not None,
+                 layout.flags, gain, sheen, self._noise,
                  _noise_offset(frame_seed, width * height), width, params)
-        out = []
-        start = 0
-        for _, _, ww, wh in boxes:
-            block = stacked[start:start + wh, :ww]
-            out.append(block if ww == span else np.ascontiguousarray(block))
-            start += wh
-        return out
+        return [out[o:o + ww * wh].reshape(wh, ww)
+                for o, (_, _, ww, wh) in zip(st.window_offsets, boxes, strict=True)]
 
-    def _stack(self, boxes: tuple, layout: _Layout) -> tuple[np.ndarray, ...]:
-        """Stacked rows of the windows (every row of every window, in order): image row,
-        first column, width, the row of the sampled atlas each reads (the last one for
-        rows of nothing but ceiling) and which stacked rows read the atlas."""
+    def _stack(self, boxes: tuple, layout: _Layout) -> _Stack:
+        """How the windows' pixels are packed (cached per window list and layout)."""
         key = ("stack", boxes, id(layout))
         cached = self._scratch.get(key)
         if cached is not None and cached[0] is layout:
@@ -457,14 +485,32 @@ class Renderer:
         rows = np.concatenate([np.arange(wy0, wy0 + wh) for _, wy0, _, wh in boxes])
         cols = np.repeat(np.array([wx0 for wx0, _, _, _ in boxes]), heights)
         widths = np.repeat(np.array([ww for _, _, ww, _ in boxes]), heights)
-        sample_idx = np.flatnonzero(layout.sampled_rows[rows])
-        sample_at = np.full(len(rows), len(sample_idx), np.int64)
-        sample_at[sample_idx] = np.arange(len(sample_idx))
-        result = (rows, cols, widths, sample_at, sample_idx)
+        out_offsets = np.concatenate(([0], np.cumsum(widths)[:-1]))
+        sampled = layout.sampled_rows[rows]
+        s_widths = widths[sampled]
+        s_offsets = np.concatenate(([0], np.cumsum(s_widths)[:-1])).astype(np.int64)
+        tex_rows = -(-int(s_widths.sum()) // _PACK)
+        tex_offsets = np.full(len(rows), tex_rows * _PACK, np.int64)  # the zero tail
+        tex_offsets[sampled] = s_offsets
+        window_offsets = np.concatenate(([0], np.cumsum(heights * np.array(
+            [ww for _, _, ww, _ in boxes]))[:-1]))
+        stack = _Stack(rows=rows, cols=cols, widths=widths, out_offsets=out_offsets,
+                       tex_offsets=tex_offsets, s_rows=rows[sampled], s_cols=cols[sampled],
+                       s_widths=s_widths, s_offsets=s_offsets, tex_rows=tex_rows,
+                       zero_len=int(widths.max()), out_len=int(widths.sum()),
+                       window_offsets=[int(o) for o in window_offsets])
         if len(self._scratch) > 64:
             self._scratch.clear()
-        self._scratch[key] = (layout, result)
-        return result
+        self._scratch[key] = (layout, stack)
+        return stack
+
+    def _box_faces(self, scene: Scene) -> BoxFaces:
+        key = ("faces", id(scene))
+        cached = self._scratch.get(key)
+        if cached is None or cached[0] is not scene:
+            cached = (scene, BoxFaces.of(scene.boxes))
+            self._scratch[key] = cached
+        return cached[1]
 
     def _affine(self, scene: Scene, x: float, y: float, yaw: float) -> np.ndarray:
         """Car-frame ground point → level-0 texel coordinates (centres at integers)."""
@@ -484,43 +530,84 @@ def _noise_offset(frame_seed: int, pixels: int) -> int:
     return (z ^ (z >> 31)) % (NOISE_BANK_SIZE - pixels)
 
 
-def obstacle_faces(camera: FisheyeCamera, boxes: np.ndarray, pose: tuple[float, float, float],
-                   white_dn: float = 255.0, max_distance_m: float = Hall().distance_m
+@dataclass(frozen=True)
+class BoxFaces:
+    """The five visible-capable faces (no bottom) of obstacle boxes, precomputed once:
+    outlines ``(n, 5, 4·OBSTACLE_EDGE_STEPS, 3)``, outward normals and face centres
+    ``(n, 5, 3)`` and box centres ``(n, 3)`` [m]."""
+
+    outlines: np.ndarray
+    normals: np.ndarray
+    mids: np.ndarray
+    centres: np.ndarray
+
+    @classmethod
+    def of(cls, boxes: np.ndarray) -> BoxFaces:
+        """Faces of boxes ``(n, 8, 3)``: corners 0–3 on the ground, 4–7 above them."""
+        quads = np.array([(4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)])
+        boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 8, 3)
+        pts = boxes[:, quads]  # (n, 5, 4, 3)
+        t = np.linspace(0.0, 1.0, OBSTACLE_EDGE_STEPS, endpoint=False)[None, None, None, :, None]
+        nxt = np.roll(pts, -1, axis=2)
+        outlines = (pts[:, :, :, None] + t * (nxt - pts)[:, :, :, None]).reshape(
+            len(boxes), 5, 4 * OBSTACLE_EDGE_STEPS, 3)
+        normals = np.cross(pts[:, :, 1] - pts[:, :, 0], pts[:, :, 3] - pts[:, :, 0])
+        normals /= np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-12)
+        mids = pts.mean(axis=2)
+        centres = boxes.mean(axis=1)
+        flip = np.einsum("nfk,nfk->nf", normals, mids - centres[:, None]) < 0
+        normals[flip] *= -1.0
+        return cls(outlines, normals, mids, centres)
+
+
+_LIGHT_DIR = np.array([0.3, -0.5, 0.81]) / np.linalg.norm([0.3, -0.5, 0.81])
+
+
+def obstacle_faces(camera: FisheyeCamera, faces: BoxFaces, pose: tuple[float, float, float],
+                   white_dn: float = 255.0, max_distance_m: float = Hall().distance_m,
+                   windows: list[tuple[int, int, int, int]] | None = None
                    ) -> list[tuple[np.ndarray, float]]:
-    """Visible faces of obstacle boxes ``(n, 8, 3)`` [m] as image polygons [px] with a
-    grey level (white carton lit from above), farthest first (painter's order). Boxes
-    beyond ``max_distance_m`` stand behind the hall's walls."""
-    if len(boxes) == 0:
+    """Faces of the obstacle boxes the camera sees, as image polygons [px] with a grey
+    level (white carton lit from above), farthest first (painter's order). Boxes beyond
+    ``max_distance_m`` stand behind the hall's walls; faces reaching behind the lens are
+    left out. With ``windows`` [(x, y, w, h) px], boxes whose corners' image bounding box
+    touches none of them are skipped (a box reaching behind the lens is always kept)."""
+    if len(faces.centres) == 0:
         return []
     x, y, yaw = pose
     cam_world = np.array([x + math.cos(yaw) * camera.mount.forward_m,
                           y + math.sin(yaw) * camera.mount.forward_m, camera.mount.height_m])
-    quads = ((4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7))  # no bottom
-    light = np.array([0.3, -0.5, 0.81])
-    t = np.linspace(0.0, 1.0, OBSTACLE_EDGE_STEPS, endpoint=False)[:, None]
-    faces = []
-    for box in boxes:
-        centre = box.mean(axis=0)
-        dist = float(np.linalg.norm(centre - cam_world))
-        if dist > max_distance_m:
-            continue
-        for quad in quads:
-            pts = box[list(quad)]
-            mid = pts.mean(axis=0)
-            normal = np.cross(pts[1] - pts[0], pts[3] - pts[0])
-            normal /= np.linalg.norm(normal)
-            if np.dot(normal, mid - centre) < 0:
-                normal = -normal
-            if np.dot(normal, cam_world - mid) <= 0:
-                continue  # facing away
-            outline = np.concatenate([pts[k] + t * (pts[(k + 1) % 4] - pts[k]) for k in range(4)])
-            cam_pts = camera.world_to_camera(outline, pose)
-            if np.any(cam_pts[:, 2] <= 0.02):
-                continue  # a face reaching behind the lens is not drawn
-            shade = white_dn * (0.72 + 0.28 * max(0.0, float(normal @ light)))
-            faces.append((dist, camera.project(cam_pts), shade))
-    faces.sort(key=lambda f: -f[0])
-    return [(uv, shade) for _, uv, shade in faces]
+    dist = np.linalg.norm(faces.centres - cam_world, axis=1)
+    near = np.flatnonzero(dist <= max_distance_m)
+    if len(near) and windows is not None:
+        corners = faces.outlines[near][:, :2, ::OBSTACLE_EDGE_STEPS].reshape(len(near), -1, 3)
+        cam_pts = camera.world_to_camera(corners.reshape(-1, 3), pose).reshape(corners.shape)
+        uv = camera.project(cam_pts.reshape(-1, 3)).reshape(len(near), -1, 2)
+        keep = []
+        for k in range(len(near)):
+            if np.any(cam_pts[k, :, 2] <= 0.02):
+                keep.append(near[k])
+                continue
+            u0, v0 = uv[k].min(axis=0) - 2.0
+            u1, v1 = uv[k].max(axis=0) + 2.0
+            if any(u1 >= wx and u0 < wx + ww and v1 >= wy and v0 < wy + wh
+                   for wx, wy, ww, wh in windows):
+                keep.append(near[k])
+        near = np.array(keep, dtype=np.int64)
+    if len(near) == 0:
+        return []
+    facing = np.einsum("nfk,nfk->nf", faces.normals[near], cam_world - faces.mids[near]) > 0
+    box_i, face_i = np.nonzero(facing)
+    if len(box_i) == 0:
+        return []
+    outlines = faces.outlines[near[box_i], face_i]  # (m, P, 3)
+    cam_pts = camera.world_to_camera(outlines.reshape(-1, 3), pose).reshape(outlines.shape)
+    in_front = np.all(cam_pts[:, :, 2] > 0.02, axis=1)
+    uv = camera.project(cam_pts.reshape(-1, 3)).reshape(len(outlines), -1, 2)
+    shade = white_dn * (0.72 + 0.28 * np.maximum(0.0, faces.normals[near[box_i], face_i]
+                                                 @ _LIGHT_DIR))
+    order = np.argsort(-dist[near[box_i]], kind="stable")
+    return [(uv[k], float(shade[k])) for k in order if in_front[k]]
 
 
 def _draw_faces(faces: list[tuple[np.ndarray, float]], width: int, height: int

@@ -19,7 +19,7 @@ from tracks import Marking, Track
 from tracks.rules import LINE_WIDTH_M, START_LINE_WIDTH_M, STOP_LINE_WIDTH_M, obstacle_corners
 
 from ..camera import FisheyeCamera
-from .renderer import Bonnet, obstacle_faces
+from .renderer import Bonnet, BoxFaces, obstacle_faces
 
 TRUTH_STEP_M: float = 0.02
 """Arc-length step [m] of the polylines the markings are drawn from."""
@@ -143,7 +143,7 @@ def frame_truth(track: Track, camera: FisheyeCamera, pose: tuple[float, float, f
     for k, ob in enumerate(track.obstacles):
         boxes[k, :4, :2] = boxes[k, 4:, :2] = obstacle_corners(track, k)
         boxes[k, 4:, 2] = ob.height_m
-    for uv, _ in obstacle_faces(camera, boxes, pose):
+    for uv, _ in obstacle_faces(camera, BoxFaces.of(boxes), pose):
         cv2.fillPoly(labels, [np.rint(uv * 16).astype(np.int32)], int(Marking.OBSTACLE),
                      lineType=cv2.LINE_8, shift=4)
     edge_row = bonnet.edge(np.arange(w), w) if bonnet.enabled else np.full(w, np.inf)
