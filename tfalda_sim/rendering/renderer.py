@@ -313,7 +313,11 @@ class Renderer:
         self.camera = camera or FisheyeCamera.default()
         self.bonnet = bonnet or Bonnet()
         self.geometry = pixel_geometry(self.camera, self.bonnet)
-        self._layouts: dict[object, object] = {}
+        # Caches. Only the current scene is held (a new scene per episode must not pile
+        # up atlases); layouts and window packings are keyed by value and bounded.
+        self._current: tuple[Scene, _Layout, BoxFaces, tuple] | None = None
+        self._layouts: dict[tuple, _Layout] = {}
+        self._stacks: dict[tuple, _Stack] = {}
         self._effect_maps: dict[Effects, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._scratch: dict[tuple, np.ndarray] = {}
         # A fixed table of N(0, 1) noise; each frame reads it at its own offset.
@@ -325,20 +329,22 @@ class Renderer:
         return self.camera.height, self.camera.width
 
     # ------------------------------------------------------------------ caches
+    def _scene_data(self, scene: Scene) -> tuple[_Layout, BoxFaces, tuple]:
+        """Layout, obstacle faces and layout key of ``scene`` (the current scene is kept)."""
+        if self._current is None or self._current[0] is not scene:
+            key = (scene.resolution_m, scene.level_origin.tobytes(), scene.hall,
+                   scene.wall_origin, scene.wall_size)
+            layout = self._layouts.get(key)
+            if layout is None:
+                layout = self._build_layout(scene)
+                if len(self._layouts) >= 4:
+                    self._layouts.pop(next(iter(self._layouts)))
+                self._layouts[key] = layout
+            self._current = (scene, layout, BoxFaces.of(scene.boxes), key)
+        return self._current[1], self._current[2], self._current[3]
+
     def _layout(self, scene: Scene) -> _Layout:
-        cached = self._layouts.get(id(scene))
-        if cached is not None and cached[0] is scene:
-            return cached[1]
-        key = (scene.resolution_m, scene.level_origin.tobytes(), scene.hall,
-               scene.wall_origin, scene.wall_size)
-        layout = self._layouts.get(key)
-        if layout is None:
-            layout = self._build_layout(scene)
-            if len(self._layouts) > 16:
-                self._layouts.clear()
-            self._layouts[key] = layout
-        self._layouts[id(scene)] = (scene, layout)
-        return layout
+        return self._scene_data(scene)[0]
 
     def _build_layout(self, scene: Scene) -> _Layout:
         g = self.geometry
@@ -422,9 +428,9 @@ class Renderer:
                     wy0 + wh > height):
                 raise ValueError(f"window {win} is not inside the {width}×{height} image")
         fx = scene.effects
-        layout = self._layout(scene)
+        layout, box_faces, layout_key = self._scene_data(scene)
         gain, sheen, params = self._maps_for(fx)
-        st = self._stack(tuple(boxes), layout)
+        st = self._stack(tuple(boxes), layout, layout_key)
         blur_m = speed_m_s * fx.motion_blur_s
         shifts = np.linspace(0.0, blur_m, MOTION_BLUR_SAMPLES) if blur_m > 0 else np.zeros(1)
         blur = len(shifts) > 1
@@ -462,7 +468,7 @@ class Renderer:
                           borderMode=cv2.BORDER_REPLICATE)
         sampled = total * np.float32(1.0 / len(shifts)) if blur else tex
         full_frame = len(boxes) == 1 and boxes[0] == (0, 0, width, height)
-        faces = obstacle_faces(self.camera, self._box_faces(scene), (x, y, yaw), fx.line_dn,
+        faces = obstacle_faces(self.camera, box_faces, (x, y, yaw), fx.line_dn,
                                scene.hall.distance_m, None if full_frame else boxes)
         drawn = _draw_faces(faces, width, height)
         (ox0, oy0), overlay, mask = drawn if drawn is not None else (
@@ -475,12 +481,12 @@ class Renderer:
         return [out[o:o + ww * wh].reshape(wh, ww)
                 for o, (_, _, ww, wh) in zip(st.window_offsets, boxes, strict=True)]
 
-    def _stack(self, boxes: tuple, layout: _Layout) -> _Stack:
+    def _stack(self, boxes: tuple, layout: _Layout, layout_key: tuple) -> _Stack:
         """How the windows' pixels are packed (cached per window list and layout)."""
-        key = ("stack", boxes, id(layout))
-        cached = self._scratch.get(key)
-        if cached is not None and cached[0] is layout:
-            return cached[1]
+        key = (boxes, layout_key)
+        cached = self._stacks.get(key)
+        if cached is not None:
+            return cached
         heights = np.array([wh for _, _, _, wh in boxes])
         rows = np.concatenate([np.arange(wy0, wy0 + wh) for _, wy0, _, wh in boxes])
         cols = np.repeat(np.array([wx0 for wx0, _, _, _ in boxes]), heights)
@@ -499,18 +505,10 @@ class Renderer:
                        s_widths=s_widths, s_offsets=s_offsets, tex_rows=tex_rows,
                        zero_len=int(widths.max()), out_len=int(widths.sum()),
                        window_offsets=[int(o) for o in window_offsets])
-        if len(self._scratch) > 64:
-            self._scratch.clear()
-        self._scratch[key] = (layout, stack)
+        if len(self._stacks) >= 32:
+            self._stacks.pop(next(iter(self._stacks)))
+        self._stacks[key] = stack
         return stack
-
-    def _box_faces(self, scene: Scene) -> BoxFaces:
-        key = ("faces", id(scene))
-        cached = self._scratch.get(key)
-        if cached is None or cached[0] is not scene:
-            cached = (scene, BoxFaces.of(scene.boxes))
-            self._scratch[key] = cached
-        return cached[1]
 
     def _affine(self, scene: Scene, x: float, y: float, yaw: float) -> np.ndarray:
         """Car-frame ground point → level-0 texel coordinates (centres at integers)."""

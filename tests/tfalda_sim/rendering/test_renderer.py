@@ -193,3 +193,18 @@ def test_walls_turn_with_the_car(renderer: Renderer) -> None:
     a = renderer.render_windows(scene, (x, y, h), [(0, 0, 752, 120)])[0]
     b = renderer.render_windows(scene, (x, y, h + 0.3), [(0, 0, 752, 120)])[0]
     assert not np.array_equal(a, b)
+
+
+def test_renderer_does_not_keep_old_scenes_alive(renderer: Renderer) -> None:
+    """A new scene per episode (domain randomisation) must not pile up atlases."""
+    import gc
+    import weakref
+
+    track = load_named("oval")
+    first = build_scene(track, Effects.off())
+    ref = weakref.ref(first)
+    renderer.render(first, lane_pose(track, 1.0))
+    renderer.render(build_scene(track, Effects()), lane_pose(track, 1.0))
+    del first
+    gc.collect()
+    assert ref() is None
