@@ -126,7 +126,8 @@ _PAD = -8.0
 
 
 @njit(cache=True, error_model="numpy")
-def _atlas_maps(maps: np.ndarray, light_maps: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+def _atlas_maps(map_x: np.ndarray, map_y: np.ndarray, light_x: np.ndarray,
+                light_y: np.ndarray, rows: np.ndarray, cols: np.ndarray,
                 widths: np.ndarray, offsets: np.ndarray, coord_a: np.ndarray,
                 coord_b: np.ndarray, scale: np.ndarray, bias_x: np.ndarray,
                 bias_y: np.ndarray, flags: np.ndarray, affine: np.ndarray, size_x: float,
@@ -134,7 +135,8 @@ def _atlas_maps(maps: np.ndarray, light_maps: np.ndarray, rows: np.ndarray, cols
                 with_light: bool) -> None:
     """Atlas coordinates (pixel centres at integers) of the requested row pieces, packed
     back to back: piece t is image row ``rows[t]``, columns ``cols[t]`` … + ``widths[t]``,
-    written to the flat, interleaved (x, y) ``maps`` from pixel ``offsets[t]`` on.
+    written to the flat ``map_x`` and ``map_y`` from pixel ``offsets[t]`` on (planar maps:
+    contiguous stores here, and OpenCV's remap reads them faster than interleaved ones).
 
     Ground pixels (flag 1): ``(coord_a, coord_b)`` is the ground hit in the car frame [m],
     moved to level-0 texels by ``affine`` and into the pixel's mip level by ``scale`` and
@@ -164,8 +166,9 @@ def _atlas_maps(maps: np.ndarray, light_maps: np.ndarray, rows: np.ndarray, cols
         bxr = bias_x[r, c0:c0 + width]
         byr = bias_y[r, c0:c0 + width]
         fr = flags[r, c0:c0 + width]
-        start = 2 * offsets[t]
-        m = maps[start:start + 2 * width]  # a slice of a flat view: no per-row reshape
+        start = offsets[t]
+        mx = map_x[start:start + width]  # slices of flat views: no per-row reshape
+        my = map_y[start:start + width]
         for j in range(width):
             g = np.float32(fr[j] & 1)  # 0/1 factors blend exactly and keep this branch-free
             # Level-0 texel coordinates, clamped into the level's zero guard band.
@@ -173,19 +176,22 @@ def _atlas_maps(maps: np.ndarray, light_maps: np.ndarray, rows: np.ndarray, cols
             y = min(max(a10 * ar[j] + a11 * br[j] + a12, lo), hy)
             w = ar[j] + shift  # both in [0, wrap): one subtraction wraps it
             w = w - wrap * np.float32(w >= wrap)
-            m[2 * j] = g * (x * sr[j]) + (one - g) * w + bxr[j]
-            m[2 * j + 1] = g * (y * sr[j] + byr[j]) + (one - g) * br[j]
+            mx[j] = g * (x * sr[j]) + (one - g) * w + bxr[j]
+            my[j] = g * (y * sr[j] + byr[j]) + (one - g) * br[j]
         if with_light:
-            lm = light_maps[start:start + 2 * width]
+            lx = light_x[start:start + width]
+            ly = light_y[start:start + width]
             for j in range(width):
-                lm[2 * j] = min(max(a00 * ar[j] + a01 * br[j] + a02, lo), hx) * ls - half
-                lm[2 * j + 1] = min(max(a10 * ar[j] + a11 * br[j] + a12, lo), hy) * ls - half
-        end = max(end, start + 2 * width)
-    for j in range(end, len(maps)):  # the tail that rounds the buffer up: reads 0
-        maps[j] = pad
+                lx[j] = min(max(a00 * ar[j] + a01 * br[j] + a02, lo), hx) * ls - half
+                ly[j] = min(max(a10 * ar[j] + a11 * br[j] + a12, lo), hy) * ls - half
+        end = max(end, start + width)
+    for j in range(end, len(map_x)):  # the tail that rounds the buffer up: reads 0
+        map_x[j] = pad
+        map_y[j] = pad
     if with_light:
-        for j in range(end, len(light_maps)):
-            light_maps[j] = pad
+        for j in range(end, len(light_x)):
+            light_x[j] = pad
+            light_y[j] = pad
 
 
 @njit(cache=True, error_model="numpy")
@@ -320,6 +326,8 @@ class Renderer:
         self._stacks: dict[tuple, _Stack] = {}
         self._effect_maps: dict[Effects, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._scratch: dict[tuple, np.ndarray] = {}
+        self._windows: dict[tuple, tuple[tuple[int, int, int, int], ...]] = {}
+        self._last_effect_maps: tuple[Effects, tuple] | None = None
         # A fixed table of N(0, 1) noise; each frame reads it at its own offset.
         bank = np.random.default_rng(0x7FA1DA).normal(0.0, 16.0, NOISE_BANK_SIZE)
         self._noise = np.clip(np.rint(bank), -127, 127).astype(np.int8)
@@ -388,6 +396,9 @@ class Renderer:
     def _maps_for(self, fx: Effects) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per-pixel gain (exposure × vignetting), floor sheen [DN] and the scalar
         parameters of the combine pass, for ``fx``."""
+        last = self._last_effect_maps
+        if last is not None and last[0] is fx:  # hashing a dataclass costs more than this
+            return last[1]
         if fx not in self._effect_maps:
             g = self.geometry
             gain = (fx.gain * (1.0 - fx.vignetting * g.radius2)).astype(np.float32)
@@ -397,6 +408,7 @@ class Renderer:
             if len(self._effect_maps) > 16:
                 self._effect_maps.clear()
             self._effect_maps[fx] = (gain, sheen, params)
+        self._last_effect_maps = (fx, self._effect_maps[fx])
         return self._effect_maps[fx]
 
     # ------------------------------------------------------------------ render
@@ -420,25 +432,26 @@ class Renderer:
         if not all(math.isfinite(v) for v in (x, y, yaw, speed_m_s)):
             raise ValueError(f"pose and speed must be finite, got {pose}, {speed_m_s}")
         width, height = self.camera.width, self.camera.height
-        boxes = [tuple(int(v) for v in win) for win in windows]
+        boxes = self._windows.get(key := tuple(map(tuple, windows)))
+        if boxes is None:
+            boxes = self._check_windows(windows)
+            if len(self._windows) >= 32:
+                self._windows.clear()
+            self._windows[key] = boxes
         if not boxes:
             return []
-        for win, (wx0, wy0, ww, wh) in zip(windows, boxes, strict=True):
-            if ww <= 0 or wh <= 0 or wx0 < 0 or wy0 < 0 or wx0 + ww > width or (
-                    wy0 + wh > height):
-                raise ValueError(f"window {win} is not inside the {width}×{height} image")
         fx = scene.effects
         layout, box_faces, layout_key = self._scene_data(scene)
         gain, sheen, params = self._maps_for(fx)
-        st = self._stack(tuple(boxes), layout, layout_key)
+        st = self._stack(boxes, layout, layout_key)
         blur_m = speed_m_s * fx.motion_blur_s
         shifts = np.linspace(0.0, blur_m, MOTION_BLUR_SAMPLES) if blur_m > 0 else np.zeros(1)
         blur = len(shifts) > 1
         with_light = scene.light is not None
         n_tex = st.tex_rows * _PACK  # sampled pixels, rounded up to whole rows of _PACK
-        maps = self._buffer("maps", (st.tex_rows, _PACK, 2), np.float32)
-        light_maps = self._buffer("light_maps", (st.tex_rows, _PACK, 2) if with_light
-                                  else (1, 1, 2), np.float32)
+        maps = self._buffer("maps", (2, st.tex_rows, _PACK), np.float32)  # planar x, y
+        light_maps = self._buffer("light_maps", (2, st.tex_rows, _PACK) if with_light
+                                  else (2, 1, 1), np.float32)
         light = self._buffer("light", (n_tex + st.zero_len, 2) if with_light else (1, 2),
                              np.uint8)
         tex = self._buffer("tex", (n_tex + st.zero_len,), np.uint8)
@@ -451,19 +464,20 @@ class Renderer:
             if not st.tex_rows:
                 break
             affine = self._affine(scene, x - back * math.cos(yaw), y - back * math.sin(yaw), yaw)
-            _atlas_maps(maps.reshape(-1), light_maps.reshape(-1), st.s_rows, st.s_cols,
+            _atlas_maps(maps[0].reshape(-1), maps[1].reshape(-1), light_maps[0].reshape(-1),
+                        light_maps[1].reshape(-1), st.s_rows, st.s_cols,
                         st.s_widths, st.s_offsets, layout.coord_a, layout.coord_b,
                         layout.scale, layout.bias_x, layout.bias_y, layout.flags, affine,
                         float(scene.level0_size[0]), float(scene.level0_size[1]), wall_shift,
                         float(scene.wall_size[0]), scene.resolution_m / LIGHT_RES_M,
                         with_light and k == 0)
-            cv2.remap(scene.atlas, maps, None, cv2.INTER_LINEAR,
+            cv2.remap(scene.atlas, maps[0], maps[1], cv2.INTER_LINEAR,
                       dst=tex[:n_tex].reshape(st.tex_rows, _PACK),
                       borderMode=cv2.BORDER_CONSTANT, borderValue=0)
             if blur:
                 total += tex
             if with_light and k == 0:
-                cv2.remap(scene.light, light_maps, None, cv2.INTER_LINEAR,
+                cv2.remap(scene.light, light_maps[0], light_maps[1], cv2.INTER_LINEAR,
                           dst=light[:n_tex].reshape(st.tex_rows, _PACK, 2),
                           borderMode=cv2.BORDER_REPLICATE)
         sampled = total * np.float32(1.0 / len(shifts)) if blur else tex
@@ -480,6 +494,21 @@ class Renderer:
                  _noise_offset(frame_seed, width * height), width, params)
         return [out[o:o + ww * wh].reshape(wh, ww)
                 for o, (_, _, ww, wh) in zip(st.window_offsets, boxes, strict=True)]
+
+    def _check_windows(self, windows: list[tuple[int, int, int, int]]
+                       ) -> tuple[tuple[int, int, int, int], ...]:
+        """The windows as int tuples, each checked to lie inside the image."""
+        width, height = self.camera.width, self.camera.height
+        boxes = []
+        for win in windows:
+            if len(win) != 4:
+                raise ValueError(f"window {win} must be (x, y, width, height) [px]")
+            wx0, wy0, ww, wh = (int(v) for v in win)
+            if ww <= 0 or wh <= 0 or wx0 < 0 or wy0 < 0 or wx0 + ww > width or (
+                    wy0 + wh > height):
+                raise ValueError(f"window {win} is not inside the {width}×{height} image")
+            boxes.append((wx0, wy0, ww, wh))
+        return tuple(boxes)
 
     def _stack(self, boxes: tuple, layout: _Layout, layout_key: tuple) -> _Stack:
         """How the windows' pixels are packed (cached per window list and layout)."""
@@ -568,30 +597,16 @@ def obstacle_faces(camera: FisheyeCamera, faces: BoxFaces, pose: tuple[float, fl
     """Faces of the obstacle boxes the camera sees, as image polygons [px] with a grey
     level (white carton lit from above), farthest first (painter's order). Boxes beyond
     ``max_distance_m`` stand behind the hall's walls; faces reaching behind the lens are
-    left out. With ``windows`` [(x, y, w, h) px], boxes whose corners' image bounding box
-    touches none of them are skipped (a box reaching behind the lens is always kept)."""
+    left out. With ``windows`` [(x, y, w, h) px], faces whose image bounding box touches
+    none of them are left out too (they cannot change a requested pixel)."""
     if len(faces.centres) == 0:
         return []
     x, y, yaw = pose
     cam_world = np.array([x + math.cos(yaw) * camera.mount.forward_m,
                           y + math.sin(yaw) * camera.mount.forward_m, camera.mount.height_m])
-    dist = np.linalg.norm(faces.centres - cam_world, axis=1)
+    d = faces.centres - cam_world
+    dist = np.sqrt(np.einsum("nk,nk->n", d, d))
     near = np.flatnonzero(dist <= max_distance_m)
-    if len(near) and windows is not None:
-        corners = faces.outlines[near][:, :2, ::OBSTACLE_EDGE_STEPS].reshape(len(near), -1, 3)
-        cam_pts = camera.world_to_camera(corners.reshape(-1, 3), pose).reshape(corners.shape)
-        uv = camera.project(cam_pts.reshape(-1, 3)).reshape(len(near), -1, 2)
-        keep = []
-        for k in range(len(near)):
-            if np.any(cam_pts[k, :, 2] <= 0.02):
-                keep.append(near[k])
-                continue
-            u0, v0 = uv[k].min(axis=0) - 2.0
-            u1, v1 = uv[k].max(axis=0) + 2.0
-            if any(u1 >= wx and u0 < wx + ww and v1 >= wy and v0 < wy + wh
-                   for wx, wy, ww, wh in windows):
-                keep.append(near[k])
-        near = np.array(keep, dtype=np.int64)
     if len(near) == 0:
         return []
     facing = np.einsum("nfk,nfk->nf", faces.normals[near], cam_world - faces.mids[near]) > 0
@@ -600,12 +615,23 @@ def obstacle_faces(camera: FisheyeCamera, faces: BoxFaces, pose: tuple[float, fl
         return []
     outlines = faces.outlines[near[box_i], face_i]  # (m, P, 3)
     cam_pts = camera.world_to_camera(outlines.reshape(-1, 3), pose).reshape(outlines.shape)
-    in_front = np.all(cam_pts[:, :, 2] > 0.02, axis=1)
+    keep = np.all(cam_pts[:, :, 2] > 0.02, axis=1)
     uv = camera.project(cam_pts.reshape(-1, 3)).reshape(len(outlines), -1, 2)
+    if windows is not None:
+        # A face drawn inside its outline's bounding box (±2 px for the fill's rounding)
+        # that misses every window cannot change a requested pixel.
+        lo = np.nan_to_num(uv.min(axis=1), nan=-1e9) - 2.0  # (m, 2)
+        hi = np.nan_to_num(uv.max(axis=1), nan=1e9) + 2.0
+        win = np.asarray(windows, dtype=np.float64)  # (k, 4)
+        touches = ((hi[:, None, 0] >= win[None, :, 0])
+                   & (lo[:, None, 0] < win[None, :, 0] + win[None, :, 2])
+                   & (hi[:, None, 1] >= win[None, :, 1])
+                   & (lo[:, None, 1] < win[None, :, 1] + win[None, :, 3]))
+        keep &= touches.any(axis=1)
     shade = white_dn * (0.72 + 0.28 * np.maximum(0.0, faces.normals[near[box_i], face_i]
                                                  @ _LIGHT_DIR))
     order = np.argsort(-dist[near[box_i]], kind="stable")
-    return [(uv[k], float(shade[k])) for k in order if in_front[k]]
+    return [(uv[k], float(shade[k])) for k in order if keep[k]]
 
 
 def _draw_faces(faces: list[tuple[np.ndarray, float]], width: int, height: int

@@ -17,6 +17,7 @@ from tfalda_sim.rendering import (
     build_scene,
     frame_truth,
 )
+from tfalda_sim.rendering.renderer import BoxFaces, obstacle_faces
 from tracks import Marking, Track, load_named
 
 ROIS = [(195, 260, 150, 75), (365, 260, 150, 75), (80, 340, 180, 85), (429, 340, 180, 85)]
@@ -86,6 +87,30 @@ def test_windows_equal_crops_of_the_full_frame(renderer: Renderer, variant: str)
         for (x, y, w, h), part in zip(wins, parts, strict=True):
             assert part.shape == (h, w) and part.dtype == np.uint8
             assert np.array_equal(part, full[y:y + h, x:x + w]), (variant, k, (x, y, w, h))
+
+
+def test_small_windows_at_an_obstacle_outline_equal_crops(renderer: Renderer) -> None:
+    """Tiny windows rendered one by one along a carton's image: the window pre-test must
+    never drop a box whose (fisheye-curved) edges reach into the window."""
+    track = generated(3)
+    scene = build_scene(track, Effects.off(), np.random.default_rng(1))
+    checked = 0
+    for ob in track.obstacles[:2]:
+        for back in (0.6, 1.2):
+            pose = lane_pose(track, ob.s_m - back)
+            full = renderer.render(scene, pose)
+            faces = obstacle_faces(renderer.camera, BoxFaces.of(scene.boxes), pose)
+            if not faces:
+                continue
+            pts = np.concatenate([uv for uv, _ in faces])
+            x0, y0 = np.clip(np.floor(pts.min(axis=0)).astype(int) - 8, 0, None)
+            x1, y1 = np.minimum(np.ceil(pts.max(axis=0)).astype(int) + 8, (752, 480))
+            for y in range(int(y0), int(y1) - 4, 4):
+                for x in range(int(x0), int(x1) - 6, 6):
+                    (part,) = renderer.render_windows(scene, pose, [(x, y, 6, 4)])
+                    assert np.array_equal(part, full[y:y + 4, x:x + 6]), (pose, x, y)
+                    checked += 1
+    assert checked > 200
 
 
 def test_same_seed_same_frame_and_noise_differs_by_seed(renderer: Renderer) -> None:
