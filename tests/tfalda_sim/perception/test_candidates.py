@@ -1,0 +1,95 @@
+"""The candidate search: the vectorised kernel equals a plain line walk, bit for bit."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from tfalda_sim.perception import TfaldaConfig
+from tfalda_sim.perception.candidates import (
+    candidates,
+    preprocess,
+    segment_pixels,
+    sobel_horizontal_edges,
+)
+from tfalda_sim.perception.params import EdgeMode
+
+
+def reference_candidates(img: np.ndarray) -> tuple[list[int], list[int], list[int]]:
+    """Listing A.2 as written: for every start x, walk every segment to every end x
+    (left to right), sum it, keep a strictly larger sum (initial max 0, end x 0)."""
+    h, w = img.shape
+    ps, ds, is_ = [], [], []
+    for x0 in range(w):
+        best, best_end = 0, 0
+        for x1 in range(w):
+            n = max(abs(x1 - x0), h - 1) + 1
+            total = 0
+            for k in range(n):
+                t = Fraction(k, n - 1) if n > 1 else Fraction(0)
+                # round half away from zero, independently of the kernel's integer formula
+                fx = (x1 - x0) * t
+                ox = int(abs(fx) + Fraction(1, 2)) * (1 if fx >= 0 else -1)
+                y = int((h - 1) * t + Fraction(1, 2))
+                total += int(img[y, x0 + ox])
+            if total > best:
+                best, best_end = total, x1
+        ps.append(x0)
+        ds.append(best_end - x0)
+        is_.append(best)
+    return ps, ds, is_
+
+
+@pytest.mark.parametrize("seed", range(300))
+def test_kernel_equals_the_plain_reference(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    h, w = int(rng.integers(2, 12)), int(rng.integers(1, 24))
+    kind = seed % 3
+    if kind == 0:  # dense noise
+        img = rng.integers(0, 256, (h, w), dtype=np.uint8)
+    elif kind == 1:  # sparse: many equal sums, exercises the tie rule
+        img = (rng.random((h, w)) < 0.1).astype(np.uint8) * 255
+    else:  # a bright slanted line on noise, as in a ROI
+        img = rng.integers(0, 30, (h, w), dtype=np.uint8)
+        x0, x1 = rng.integers(0, w, 2)
+        for y, x in ((y, x0 + round((x1 - x0) * y / max(h - 1, 1))) for y in range(h)):
+            img[y, x] = 250
+    p, d, i = candidates(img)
+    rp, rd, ri = reference_candidates(img)
+    assert p.tolist() == rp
+    assert d.tolist() == rd, (h, w, kind)
+    assert i.tolist() == ri
+
+
+def test_all_dark_candidates_keep_the_listing_end_x_0() -> None:
+    p, d, i = candidates(np.zeros((5, 7), np.uint8))
+    assert i.tolist() == [0] * 7
+    assert (p + d).tolist() == [0] * 7
+
+
+def test_segment_pixels_are_connected_and_end_at_both_points() -> None:
+    for x0, x1, h in [(0, 9, 4), (5, 0, 10), (3, 3, 6), (0, 20, 21)]:
+        px = segment_pixels(x0, x1, h)
+        assert px[0] == (x0, 0) and px[-1] == (x1, h - 1)
+        steps = np.abs(np.diff(np.array(px), axis=0))
+        assert steps.max() <= 1 and np.all(steps.sum(axis=1) >= 1)
+
+
+def test_sobel_manager_switches_beyond_45_degrees() -> None:
+    assert not sobel_horizontal_edges(40.0, 84.0, 45.0)
+    assert sobel_horizontal_edges(90.0, 84.0, 45.0)
+    assert not sobel_horizontal_edges(-84.0, 84.0, 45.0)  # exactly 45°: stays vertical
+
+
+def test_rising_edges_only_unless_both_are_asked_for() -> None:
+    crop = np.zeros((20, 40), np.uint8)
+    crop[:, 20:24] = 255  # a vertical white line
+    rising = preprocess(crop, TfaldaConfig(resample_factor=1.0), horizontal_edges=False)
+    both = preprocess(crop, TfaldaConfig(resample_factor=1.0, edge_mode=EdgeMode.BOTH), False)
+    cols_rising = np.flatnonzero(rising.max(axis=0))
+    cols_both = np.flatnonzero(both.max(axis=0))
+    assert cols_rising.max() < 22  # only the dark→bright (left) edge
+    assert cols_both.max() > 22  # both edges
+    assert preprocess(crop, TfaldaConfig(), False).shape == (10, 20)  # resampled by 2

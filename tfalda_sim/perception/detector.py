@@ -1,0 +1,279 @@
+"""TFALDA with the Lane Inference System, frame by frame (listing A.2 ``notify``).
+
+Per frame: for every ROI, pre-process and search the candidates, then pick the lane —
+the largest ``I`` in a first frame, else the smallest λ (listing 3.1) against that ROI's
+lane of the last frame; then (not in a first frame) the LIS checks and corrects the lanes;
+then the ROIs of the next frame are placed from the lanes and the driving state. When the
+fault counter passes its limit, the ROIs go back to table 2.4 and the next frame is a first
+frame again (section 2.4; reported in the frame that caused it).
+
+Works on any 8-bit grayscale sequence: ``process(frame)`` takes whole frames,
+``process_crops(crops)`` only the pixels of ``rois`` (what the simulator renders on demand).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .candidates import candidates, preprocess, sobel_horizontal_edges
+from .lane import Lane
+from .lis import LaneInferenceSystem, LisResult, Rows
+from .params import DetectorConfig
+from .rois import (
+    LaneChange,
+    Roi,
+    StateKind,
+    Straight,
+    classify,
+    follow,
+    initial_rois,
+    state_of,
+    windows,
+)
+
+
+@dataclass(frozen=True)
+class LaneObservation:
+    """One frame's result. Arrays index the ROIs row by row, top row first, left before
+    right: for the thesis' two rows 0 upper-left, 1 upper-right, 2 lower-left,
+    3 lower-right (table 2.4's order)."""
+
+    frame: int
+    """Frames processed before this one since the detector was made (0-based)."""
+    rois: np.ndarray
+    """(n, 4) int32: the ROIs ``(x, y, w, h)`` [px] this frame was read through."""
+    lanes: np.ndarray
+    """(n, 4) float64: each lane's ends ``(x_top, y_top, x_bottom, y_bottom)`` [px]."""
+    d: np.ndarray
+    """(n,) float64: D = x_bottom − x_top [px]."""
+    intensity: np.ndarray
+    """(n,) float64: I, the summed gradient along the lane (resampled gradient units)."""
+    lam: np.ndarray
+    """(n,) float64: λ of the distance function; NaN where the first-frame rule chose."""
+    replaced: np.ndarray
+    """(n,) bool: the LIS rejected this frame's lane and kept the last frame's."""
+    corrected: np.ndarray
+    """(n,) bool: the vertical check moved the lane's upper end."""
+    widths: np.ndarray
+    """(rows, 2) float64: the low-pass filtered lane width at each row's top and bottom
+    edge [px] (the measured ones in a first frame or with the filter off)."""
+    fault_count: int
+    reset: bool
+    """The fault counter passed its limit in this frame: the next frame starts afresh."""
+    state: StateKind
+    """The driving state the next ROIs were placed in (the topmost row's that is not
+    straight; rows classify themselves unless a state is forced)."""
+    first_frame: bool
+    """This frame was a first frame (start or after a reset): largest I, no LIS."""
+    next_rois: np.ndarray
+    """(n, 4) int32: the ROIs of the next frame."""
+
+    @property
+    def n_rows(self) -> int:
+        return len(self.widths)
+
+
+def check_frame(frame: object, width: int, height: int) -> np.ndarray:
+    """``frame`` if it is a (height, width) uint8 array, else a ValueError/TypeError that
+    names what was given and how to fix it."""
+    if not isinstance(frame, np.ndarray):
+        raise TypeError(f"frame must be a numpy array, got {type(frame).__name__}")
+    if frame.dtype != np.uint8:
+        raise ValueError(f"frame must be uint8 grayscale, got dtype {frame.dtype}; convert "
+                         "with cv2.convertScaleAbs or frame.astype(np.uint8) after scaling")
+    if frame.ndim == 3 and frame.shape[2] in (1, 3, 4):
+        raise ValueError(f"frame must be 2-D grayscale, got shape {frame.shape}; use "
+                         "frame[..., 0] for one channel or cv2.cvtColor(frame, "
+                         "cv2.COLOR_BGR2GRAY) for colour")
+    if frame.shape != (height, width):
+        raise ValueError(f"frame must have shape ({height}, {width}), got {frame.shape}; "
+                         f"resize with cv2.resize(frame, ({width}, {height}))")
+    return frame
+
+
+class TfaldaDetector:
+    """TFALDA + LIS on a frame sequence. ``config`` selects each stage
+    (``DetectorConfig.thesis()``, ``.without_lis()``, ``.improved()``)."""
+
+    def __init__(self, config: DetectorConfig | None = None) -> None:
+        self.config = config or DetectorConfig.thesis()
+        self.lis = LaneInferenceSystem(self.config.lis, self.config.layout.rows)
+        self._frames = 0
+        self._forced: StateKind | None = None
+        self.reset()
+
+    # ----------------------------------------------------------------- state
+    def reset(self) -> None:
+        """Back to table 2.4's ROIs; the next frame is a first frame (section 2.4)."""
+        self._rois: list[tuple[Roi, Roi]] = initial_rois(self.config.layout)
+        self._previous: Rows | None = None  # last frame's final lanes
+        self._fresh_side: list[list[bool]] | None = None  # lane change: sides to re-find
+        self._state = state_of(self._forced) if self._forced else Straight()
+        self.lis.reset()
+
+    def force_state(self, kind: StateKind | None) -> None:
+        """Impose a driving state from outside (section 2.3.2), e.g. a planned lane change;
+        ``None`` hands the choice back to the detector."""
+        if kind in (StateKind.LANE_CHANGE_LEFT, StateKind.LANE_CHANGE_RIGHT) and not (
+                self.config.lis.lane_change_state):
+            raise ValueError("lane-change states need LisConfig(lane_change_state=True)")
+        self._forced = kind
+        self._state = state_of(kind) if kind is not None else Straight()
+
+    @property
+    def rois(self) -> list[tuple[int, int, int, int]]:
+        """The ``(x, y, w, h)`` windows [px] the next frame is read through."""
+        return windows(self._rois)
+
+    # ----------------------------------------------------------------- frames
+    def process(self, frame: np.ndarray) -> LaneObservation:
+        """Detect the lanes in a whole ``(480, 752)`` uint8 frame."""
+        layout = self.config.layout
+        check_frame(frame, layout.image_width, layout.image_height)
+        return self._process([frame[y:y + h, x:x + w] for x, y, w, h in self.rois])
+
+    def process_crops(self, crops: list[np.ndarray]) -> LaneObservation:
+        """Detect the lanes from the crops of ``rois`` only (same order and sizes)."""
+        wins = self.rois
+        if len(crops) != len(wins):
+            raise ValueError(f"expected {len(wins)} crops (one per ROI), got {len(crops)}")
+        for k, (crop, (_, _, w, h)) in enumerate(zip(crops, wins, strict=True)):
+            if not isinstance(crop, np.ndarray) or crop.dtype != np.uint8 or crop.shape != (h, w):
+                given = (f"{crop.shape} {crop.dtype}" if isinstance(crop, np.ndarray)
+                         else type(crop).__name__)
+                raise ValueError(f"crop {k} must be a ({h}, {w}) uint8 array for ROI "
+                                 f"{wins[k]}, got {given}")
+        return self._process(crops)
+
+    def _process(self, crops: list[np.ndarray]) -> LaneObservation:
+        cfg = self.config
+        first = self._previous is None
+        rois_used = self._rois
+        rows: Rows = []
+        for r, pair in enumerate(rois_used):
+            found = []
+            for side, roi in enumerate(pair):
+                prev = None if first else self._previous[r][side]
+                if self._fresh_side is not None and self._fresh_side[r][side]:
+                    prev = None
+                found.append(self._find(crops[2 * r + side], roi, prev))
+            rows.append((found[0], found[1]))
+        self._fresh_side = None
+        result: LisResult | None = None
+        if first:
+            self.lis.start(rows)
+            final = rows
+        else:
+            result = self.lis.infer(rows, self._previous)
+            final = result.rows
+        widths = result.widths if result is not None else self.lis.widths.copy()
+        reset = result is not None and result.reset_due
+        # ROIs of the next frame (listing A.2 places none after a first frame).
+        base = final if (cfg.lis.roi_from_current_lanes or first) else self._previous
+        if reset:
+            state_kind = self._state.kind
+        else:
+            state_kind = self._place(base, final, first)
+        obs = LaneObservation(
+            frame=self._frames,
+            rois=np.array(windows(rois_used), dtype=np.int32),
+            lanes=np.array([(ln.x_top, ln.y_top, ln.x_bottom, ln.y_bottom)
+                            for pair in final for ln in pair], dtype=np.float64),
+            d=np.array([ln.d for pair in final for ln in pair], dtype=np.float64),
+            intensity=np.array([ln.i for pair in final for ln in pair], dtype=np.float64),
+            lam=np.array([ln.lam for pair in final for ln in pair], dtype=np.float64),
+            replaced=np.repeat(np.array(result.replaced if result else [False] * len(final)), 2),
+            corrected=np.array([c for pair in (result.corrected if result else
+                                               [(False, False)] * len(final)) for c in pair]),
+            widths=np.asarray(widths, dtype=np.float64),
+            fault_count=self.lis.fault_count,
+            reset=reset,
+            state=state_kind,
+            first_frame=first,
+            next_rois=np.empty((0, 4), np.int32),  # filled below
+        )
+        self._frames += 1
+        if reset:
+            self.reset()
+        else:
+            self._previous = final
+        object.__setattr__(obs, "next_rois", np.array(self.rois, dtype=np.int32))
+        return obs
+
+    def _find(self, crop: np.ndarray, roi: Roi, prev: Lane | None) -> Lane:
+        """TFALDA on one ROI: the lane chosen among its candidates."""
+        tcfg = self.config.tfalda
+        height = roi.height - 1
+        horizontal = (tcfg.sobel_manager and prev is not None
+                      and sobel_horizontal_edges(prev.d, prev.y_bottom - prev.y_top,
+                                                 tcfg.sobel_switch_angle_deg))
+        grad = preprocess(crop, tcfg, horizontal)
+        p, d, i = candidates(grad)
+        # Back to image coordinates (listing A.6 normalize_vector: × resample factor + ROI
+        # offset), pixel centre to pixel centre and with the crop's exact factor [px].
+        fx = roi.width / grad.shape[1]
+        p_img = (p + 0.5) * fx - 0.5 + roi.x
+        d_img = d * fx
+        if prev is None:
+            k = int(np.argmax(i))  # first frame: the largest I (first of equals)
+            lam = math.nan
+        else:
+            lam_all = (tcfg.kp * np.abs(p_img - prev.p) + tcfg.kd * np.abs(d_img - prev.d)
+                       + tcfg.ki * (prev.i - i))
+            k = int(np.argmin(lam_all))  # smallest λ (first of equals)
+            lam = float(lam_all[k])
+        return Lane(float(p_img[k]), float(d_img[k]), float(i[k]), float(roi.y),
+                    float(roi.y + height), lam)
+
+    def _place(self, base: Rows, final: Rows, first: bool) -> StateKind:
+        """Place the next frame's ROIs from ``base`` lanes; returns the driving state."""
+        lis = self.config.lis
+        width = self.config.layout.image_width
+        if first or not lis.roi_placement:
+            return self._state.kind
+        state = self._state
+        if isinstance(state, LaneChange):
+            lowest_left, lowest_right = final[-1]
+            if state.crossed(lowest_left.x_bottom, lowest_right.x_bottom, width):
+                self._hand_over(state.to_left)
+                self._forced = None
+                self._state = Straight()
+                return StateKind.STRAIGHT
+        new, kinds = [], []
+        for (left, right), (lroi, rroi) in zip(base, self._rois, strict=True):
+            lnext, rnext = follow(left, lroi, width), follow(right, rroi, width)
+            row_state = state
+            if self._forced is None and not isinstance(state, LaneChange):
+                row_state = classify(lnext, rnext) if lis.curve_states else Straight()
+            lnext, rnext = row_state.correct(lnext, rnext, width)
+            new.append((lnext, rnext))
+            kinds.append(row_state.kind)
+        self._rois = new
+        # The frame's state: the first row (from the top) that is not driving straight.
+        return next((k for k in kinds if k is not StateKind.STRAIGHT), StateKind.STRAIGHT)
+
+    def _hand_over(self, to_left: bool) -> None:
+        """Lane change done: the line crossed becomes the far side's line of the new lane,
+        and the near side searches afresh one lane width further over."""
+        width = self.config.layout.image_width
+        assert self._previous is not None
+        new_rois, new_prev, fresh = [], [], []
+        for (left, right), (lroi, rroi) in zip(self._previous, self._rois, strict=True):
+            lane_w = right.x_bottom - left.x_bottom
+            if to_left:  # old left line → new right line; new left line further left
+                moved = Lane(left.p - lane_w, left.d, left.i, left.y_top, left.y_bottom)
+                new_prev.append((moved, left))
+                new_rois.append((follow(moved, lroi, width), follow(left, rroi, width)))
+                fresh.append([True, False])
+            else:
+                moved = Lane(right.p + lane_w, right.d, right.i, right.y_top, right.y_bottom)
+                new_prev.append((right, moved))
+                new_rois.append((follow(right, lroi, width), follow(moved, rroi, width)))
+                fresh.append([False, True])
+        self._previous = new_prev
+        self._rois = new_rois
+        self._fresh_side = fresh
+        self.lis.start(new_prev)

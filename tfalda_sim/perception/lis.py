@@ -1,0 +1,138 @@
+"""The Lane Inference System (thesis section 2, listing A.4), on lanes alone.
+
+Per ROI row, bottom row first as in listing 3.3 / A.4, in this order:
+
+1. low-pass filter of the lane width at the row's top and bottom edge (eq. 2.1/2.2; it runs
+   every frame, also when the row is rejected);
+2. min/max check of the measured widths (table 2.3);
+3. width-change check of the filtered widths (listing 2.2 / A.4);
+   a rejected row takes the previous frame's lanes and raises the fault counter, an
+   accepted one lowers it by one (not below 0);
+4. vertical check (section 2.2, eq. 2.4): the lane above fixes the direction, the lower
+   lane's upper end is moved onto its line when they differ by more than the tolerance;
+5. the filtered widths are remembered.
+
+After the rows: a fault counter above the limit asks for a reset (section 2.4).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .lane import Lane
+from .params import LisConfig, WidthCheck
+
+Rows = list[tuple[Lane, Lane]]
+"""Lanes per ROI row, top row first: (left, right)."""
+
+_LIMIT_ROWS_PX = np.array([260.0, 334.0, 340.0, 424.0])
+"""Image rows [px] where table 2.3's limits are measured: the upper ROI row's top and
+bottom edge and the lower row's (table 2.4 geometry)."""
+
+
+def width_limits(config: LisConfig, y_px: float) -> tuple[float, float]:
+    """(min, max) lane width [px] at image row ``y_px``: table 2.3's values at its four
+    rows, linear in between (for layouts with more than two rows) and held beyond."""
+    lo = np.array([a for a, _ in config.width_limits_px])
+    hi = np.array([b for _, b in config.width_limits_px])
+    return float(np.interp(y_px, _LIMIT_ROWS_PX, lo)), float(np.interp(y_px, _LIMIT_ROWS_PX, hi))
+
+
+def measured_widths(left: Lane, right: Lane) -> tuple[float, float]:
+    """Lane width at the row's top and bottom edge [px] (listing A.4 ``lowpass``)."""
+    return right.x_top - left.x_top, right.x_bottom - left.x_bottom
+
+
+def vertical_target(upper: Lane, lower: Lane) -> float:
+    """x [px] of the upper lane's line at the height midway between its lower end and the
+    lower lane's upper end: eq. 2.4, ``x = x1 − (x2 − x1)/(y2 − y1) · (y1 − y)`` with P1 the
+    upper lane's lower end and P2 its upper end (listing A.4 has an operator-precedence slip
+    here; the equation is used)."""
+    x1, y1 = upper.x_bottom, upper.y_bottom
+    x2, y2 = upper.x_top, upper.y_top
+    y = 0.5 * (lower.y_top + y1)
+    if y2 == y1:
+        return x1
+    return x1 - (x2 - x1) / (y2 - y1) * (y1 - y)
+
+
+@dataclass(frozen=True)
+class LisResult:
+    """What the LIS made of one frame's lanes."""
+
+    rows: Rows
+    replaced: list[bool]  # per row: took the previous frame's lanes
+    corrected: list[tuple[bool, bool]]  # per row and side: upper end moved by the vertical check
+    widths: np.ndarray  # (rows, 2) filtered widths at the top and bottom edge [px]
+    fault_count: int
+    reset_due: bool
+
+
+class LaneInferenceSystem:
+    """The LIS's memory (filtered widths, fault counter) and its per-frame inference."""
+
+    def __init__(self, config: LisConfig, rows: int) -> None:
+        self.config = config
+        self.n_rows = rows
+        self.widths = np.zeros((rows, 2))  # y_{n−1}: last filtered widths [px]
+        self.fault_count = 0
+
+    def start(self, rows: Rows) -> None:
+        """Initialise the filter with a first frame's widths (listing A.4 ``init``)."""
+        self.widths = np.array([measured_widths(left, right) for left, right in rows],
+                               dtype=np.float64)
+
+    def reset(self) -> None:
+        self.fault_count = 0
+
+    def infer(self, rows: Rows, previous: Rows) -> LisResult:
+        """Check and correct ``rows`` (this frame's lanes) against ``previous`` (the last
+        frame's final lanes)."""
+        cfg = self.config
+        alpha = cfg.alpha
+        out = list(rows)
+        replaced = [False] * len(rows)
+        corrected = [(False, False)] * len(rows)
+        new_widths = self.widths.copy()
+        for r in range(len(rows) - 1, -1, -1):  # bottom row first
+            left, right = out[r]
+            measured = np.array(measured_widths(left, right))
+            filtered = (alpha * measured + (1.0 - alpha) * self.widths[r] if cfg.lowpass
+                        else measured)
+            ok = True
+            if cfg.min_max:
+                for k, y in enumerate((left.y_top, left.y_bottom)):
+                    lo, hi = width_limits(cfg, y)
+                    ok = ok and lo <= measured[k] <= hi
+            if ok and cfg.width_change:
+                seen = filtered if cfg.width_check is WidthCheck.FILTERED else measured
+                ok = bool(np.all(np.abs(seen - self.widths[r]) <= cfg.width_tolerance_px))
+            if not ok:
+                out[r] = previous[r]
+                replaced[r] = True
+                self.fault_count += 1
+            elif self.fault_count > 0:
+                self.fault_count -= 1
+            if cfg.vertical and r > 0:
+                out[r], corrected[r] = self._vertical(out[r - 1], out[r])
+            new_widths[r] = filtered
+        self.widths = new_widths
+        reset_due = cfg.reset and self.fault_count > cfg.fault_limit
+        return LisResult(out, replaced, corrected, new_widths.copy(), self.fault_count,
+                         reset_due)
+
+    def _vertical(self, upper: tuple[Lane, Lane], lower: tuple[Lane, Lane]
+                  ) -> tuple[tuple[Lane, Lane], tuple[bool, bool]]:
+        cfg = self.config
+        new, moved = [], []
+        for up, low in zip(upper, lower, strict=True):
+            x3 = vertical_target(up, low)
+            if abs(x3 - low.x_top) > cfg.vertical_tolerance_px:
+                new.append(low.with_top(low.x_top + cfg.vertical_weight * (x3 - low.x_top)))
+                moved.append(True)
+            else:
+                new.append(low)
+                moved.append(False)
+        return (new[0], new[1]), (moved[0], moved[1])
