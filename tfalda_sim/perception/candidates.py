@@ -46,40 +46,50 @@ def segment_pixels(x0: int, x1: int, height: int) -> list[tuple[int, int]]:
 
 
 @njit(cache=True, error_model="numpy")
-def search_candidates(img: np.ndarray, best_i: np.ndarray, best_end: np.ndarray,
-                      sums: np.ndarray) -> None:
-    """For every start x of the top row of ``img`` (H, W) uint8: the largest segment sum
-    over all end x of the bottom row (``best_i``, int32) and that end x (``best_end``,
-    int32); ``sums`` is int32 scratch of length ≥ W."""
-    h, w = img.shape
+def search_candidates(flat: np.ndarray, height: int, width: int, best_i: np.ndarray,
+                      best_end: np.ndarray, sums: np.ndarray) -> None:
+    """For every start x of the top row of an image (``flat``: its ``height`` × ``width``
+    pixels row by row, int32): the largest segment sum over all end x of the bottom row
+    (``best_i``, int32) and that end x (``best_end``, int32); ``sums`` is int32 scratch of
+    length ≥ width. (int32 pixels and slices of the flat array keep the inner loops plain
+    vector additions.)"""
+    w = width
     for x in range(w):
         best_i[x] = 0
         best_end[x] = 0
-    dy = h - 1
+    dy = height - 1
     for dx in range(-(w - 1), w):  # ascending end x for every start
         adx = abs(dx)
         n = max(adx, dy) + 1
         lo = max(0, -dx)
         m = min(w, w - dx) - lo
-        for k in range(m):
-            sums[k] = 0
+        acc = sums[:m]
+        acc[:] = 0
+        # Sample i sits at round(i·adx/(n−1)), round(i·dy/(n−1)) (halves away from zero),
+        # stepped with remainders instead of two integer divisions per sample.
+        den = 2 * (n - 1)
+        ox = 0
+        y = 0
+        rx = n - 1
+        ry = n - 1
         for i in range(n):
-            if n > 1:
-                ox = (2 * i * adx + (n - 1)) // (2 * (n - 1))
-                y = (2 * i * dy + (n - 1)) // (2 * (n - 1))
-            else:
-                ox = 0
-                y = 0
-            if dx < 0:
-                ox = -ox
-            row = img[y]
-            base = lo + ox
+            if i > 0:
+                rx += 2 * adx
+                if rx >= den:
+                    rx -= den
+                    ox += 1
+                ry += 2 * dy
+                if ry >= den:
+                    ry -= den
+                    y += 1
+            start = y * w + (lo + ox if dx >= 0 else lo - ox)
+            seg = flat[start:start + m]
             for k in range(m):
-                sums[k] += np.int32(row[base + k])
+                acc[k] += seg[k]
         for k in range(m):  # branch-free update: vectorises
             x = lo + k
-            gt = np.int32(sums[k] > best_i[x])
-            best_i[x] = best_i[x] + gt * (sums[k] - best_i[x])
+            gt = np.int32(acc[k] > best_i[x])
+            best_i[x] = best_i[x] + gt * (acc[k] - best_i[x])
             best_end[x] = best_end[x] + gt * (x + dx - best_end[x])
 
 
@@ -106,9 +116,10 @@ def preprocess(crop: np.ndarray, config: TfaldaConfig, horizontal_edges: bool) -
 
 def candidates(gradient: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(P, D, I)`` of every start x of a gradient image, in its own pixels (int64)."""
-    w = gradient.shape[1]
+    h, w = gradient.shape
     best_i = np.empty(w, np.int32)
     best_end = np.empty(w, np.int32)
-    search_candidates(np.ascontiguousarray(gradient), best_i, best_end, np.empty(w, np.int32))
+    search_candidates(gradient.astype(np.int32).ravel(), h, w, best_i, best_end,
+                      np.empty(w, np.int32))
     p = np.arange(w, dtype=np.int64)
     return p, best_end.astype(np.int64) - p, best_i.astype(np.int64)

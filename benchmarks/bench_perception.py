@@ -1,0 +1,93 @@
+"""Benchmark of TFALDA + LIS per frame, on one core.
+
+    python benchmarks/bench_perception.py [--frames 2000] [--json]
+
+Frames are rendered first (not timed) along the right lane of the named tracks and two
+generated ones, then fed to the detector in order, as a drive would: ``process(frame)``
+for whole frames and ``process_crops`` for the four ROIs only. Presets: the thesis ("all
+on"), without the LIS, and the improved one (three ROI rows). The process is pinned to one
+CPU and OpenCV to one thread. Target (issue 4): thesis preset ≤ 0.5 ms median per frame.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from tfalda_sim.perception import DetectorConfig, TfaldaDetector
+from tfalda_sim.rendering import Effects, Renderer, build_scene
+from tracks import generate, load_named
+
+
+def _frames(n: int, quiet: bool) -> list[np.ndarray]:
+    renderer = Renderer()
+    tracks = [load_named("oval"), load_named("thesis"), load_named("figure-eight"),
+              generate(3), generate(11)]
+    per = max(1, n // len(tracks))
+    frames = []
+    rng = np.random.default_rng(0)
+    for track in tqdm(tracks, desc="rendering", disable=quiet, file=sys.stderr):
+        scene = build_scene(track, Effects(), rng)
+        s = np.arange(per) * 0.03 + 0.3  # 1.5 m/s at 50 frames/s
+        s = s % track.length_m if track.closed else np.minimum(s, track.length_m - 1.5)
+        x, y, h = track.pose(s, -0.5 * track.lane_width_m)
+        frames += [renderer.render(scene, (float(a), float(b), float(c)), frame_seed=k)
+                   for k, (a, b, c) in enumerate(zip(x, y, h, strict=True))]
+    return frames
+
+
+def run(n: int, quiet: bool) -> dict[str, object]:
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+    cv2.setNumThreads(1)
+    frames = _frames(n, quiet)
+    presets = {"thesis": DetectorConfig.thesis(), "without LIS": DetectorConfig.without_lis(),
+               "improved (3 rows)": DetectorConfig.improved()}
+    results = {}
+    for name, config in presets.items():
+        TfaldaDetector(config).process(frames[0])  # JIT warm-up
+        det = TfaldaDetector(config)
+        times = []
+        for frame in tqdm(frames, desc=name, disable=quiet, file=sys.stderr):
+            t0 = time.perf_counter()
+            det.process(frame)
+            times.append(time.perf_counter() - t0)
+        ms = 1000 * np.array(times)
+        results[name] = {"median_ms": float(np.median(ms)), "p95_ms": float(np.percentile(ms, 95)),
+                         "frames_per_s": float(1000 / np.median(ms)), "frames": len(ms)}
+    return {"machine": {"cores": os.cpu_count(), "pinned_to_one_core": True,
+                        "opencv_threads": cv2.getNumThreads(),
+                        "python": platform.python_version()},
+            "presets": results}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=2000, help="frames per preset")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    args = parser.parse_args(argv)
+    if args.frames < 1:
+        parser.error("--frames must be ≥ 1")
+    result = run(args.frames, quiet=args.json)
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    m = result["machine"]
+    print(f"machine: {m['cores']} cores, pinned to one, OpenCV threads {m['opencv_threads']}")
+    print(f"{'preset':<20}{'median':>10}{'p95':>10}{'frames/s':>10}")
+    for name, r in result["presets"].items():
+        print(f"{name:<20}{r['median_ms']:>8.3f}ms{r['p95_ms']:>8.3f}ms{r['frames_per_s']:>10.0f}")
+    print("target: thesis preset ≤ 0.5 ms median per frame (≥ 2000 frames/s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
