@@ -26,6 +26,7 @@ test: install
 bench: install
 	$(BIN)/python benchmarks/bench_tracks.py
 	$(BIN)/python benchmarks/bench_render.py
+	$(BIN)/python benchmarks/bench_perception.py
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache

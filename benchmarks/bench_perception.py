@@ -5,7 +5,7 @@
 Frames are rendered first (not timed) along the right lane of the named tracks and two
 generated ones, then fed to the detector in order, as a drive would: ``process(frame)``
 for whole frames and ``process_crops`` for the four ROIs only. Presets: the thesis ("all
-on"), without the LIS, and the improved one (three ROI rows). The process is pinned to one
+on"), without the LIS, and the improved one with two and three ROI rows. The process is pinned to one
 CPU and OpenCV to one thread. Target (issue 4): thesis preset ≤ 0.5 ms median per frame.
 """
 
@@ -50,7 +50,8 @@ def run(n: int, quiet: bool) -> dict[str, object]:
     cv2.setNumThreads(1)
     frames = _frames(n, quiet)
     presets = {"thesis": DetectorConfig.thesis(), "without LIS": DetectorConfig.without_lis(),
-               "improved (3 rows)": DetectorConfig.improved()}
+               "improved (2 rows)": DetectorConfig.improved(),
+               "improved (3 rows)": DetectorConfig.improved(3)}
     results = {}
     for name, config in presets.items():
         TfaldaDetector(config).process(frames[0])  # JIT warm-up

@@ -54,7 +54,8 @@ class LaneObservation:
     lam: np.ndarray
     """(n,) float64: λ of the distance function; NaN where the first-frame rule chose."""
     replaced: np.ndarray
-    """(n,) bool: the LIS rejected this frame's lane and kept the last frame's."""
+    """(n,) bool: the LIS rejected this frame's lane and kept the last frame's (its row's
+    width checks, or the gap hold of an improved configuration)."""
     corrected: np.ndarray
     """(n,) bool: the vertical check moved the lane's upper end."""
     widths: np.ndarray
@@ -153,13 +154,18 @@ class TfaldaDetector:
         first = self._previous is None
         rois_used = self._rois
         rows: Rows = []
+        held = np.zeros(2 * len(rois_used), dtype=bool)
         for r, pair in enumerate(rois_used):
             found = []
             for side, roi in enumerate(pair):
                 prev = None if first else self._previous[r][side]
                 if self._fresh_side is not None and self._fresh_side[r][side]:
                     prev = None
-                found.append(self._find(crops[2 * r + side], roi, prev))
+                lane = self._find(crops[2 * r + side], roi, prev)
+                if prev is not None and lane.i < cfg.lis.gap_hold_ratio * prev.i:
+                    lane = prev  # no marking here (a gap): keep the last lane
+                    held[2 * r + side] = True
+                found.append(lane)
             rows.append((found[0], found[1]))
         self._fresh_side = None
         result: LisResult | None = None
@@ -185,7 +191,8 @@ class TfaldaDetector:
             d=np.array([ln.d for pair in final for ln in pair], dtype=np.float64),
             intensity=np.array([ln.i for pair in final for ln in pair], dtype=np.float64),
             lam=np.array([ln.lam for pair in final for ln in pair], dtype=np.float64),
-            replaced=np.repeat(np.array(result.replaced if result else [False] * len(final)), 2),
+            replaced=held | np.repeat(np.array(result.replaced if result else
+                                               [False] * len(final)), 2),
             corrected=np.array([c for pair in (result.corrected if result else
                                                [(False, False)] * len(final)) for c in pair]),
             widths=np.asarray(widths, dtype=np.float64),

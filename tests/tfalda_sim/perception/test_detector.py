@@ -36,13 +36,18 @@ def drive(renderer: Renderer, track: Track, config: DetectorConfig, step_m: floa
 
 
 def test_straight_track_lanes_lie_on_the_markings(renderer: Renderer) -> None:
+    # the thesis preset: three lanes always on their markings; the lower-left ROI spans
+    # less ground than a dash period, so over gaps it follows noise: the thesis' own dips
+    # (section 4.2.1, figure 4.2), here ≈ 0.83 for that lane; see docs/tfalda.md
     rates, obs = drive(renderer, load_named("straight"), DetectorConfig.thesis())
     per_lane = rates.mean(axis=0)
     assert rates.mean() >= 0.95  # the frame confidence of section 4.1.7, averaged
     assert per_lane[[0, 1, 3]].min() >= 0.95
-    # the lower-left ROI spans less ground than a dash period: the thesis' own dips
-    # (figure 4.2); see docs/tfalda.md
-    assert per_lane[2] >= 0.75
+    assert 0.7 <= per_lane[2] < 0.95
+    assert not any(o.reset for o in obs)
+    # with the section-5 improvements (gap hold) all four lanes stay on the markings
+    rates, obs = drive(renderer, load_named("straight"), DetectorConfig.improved())
+    assert rates.mean(axis=0).min() >= 0.95
     assert not any(o.reset for o in obs)
 
 
