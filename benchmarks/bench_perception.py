@@ -2,11 +2,11 @@
 
     python benchmarks/bench_perception.py [--frames 2000] [--json]
 
-Frames are rendered first (not timed) along the right lane of the named tracks and two
-generated ones, then fed to the detector in order, as a drive would: ``process(frame)``
-for whole frames and ``process_crops`` for the four ROIs only. Presets: the thesis ("all
-on"), without the LIS, and the improved one with two and three ROI rows. The process is pinned to one
-CPU and OpenCV to one thread. Target (issue 4): thesis preset ≤ 0.5 ms median per frame.
+Frames are rendered first (not timed) along the right lane of three named tracks and two
+generated ones, then fed to ``TfaldaDetector.process`` in order, as a drive would.
+Presets: the thesis ("all on"), without the LIS, and the improved one with two and three
+ROI rows. The process is pinned to one CPU and OpenCV to one thread. Target (issue 4):
+thesis preset ≤ 0.5 ms median per frame.
 """
 
 from __future__ import annotations

@@ -173,3 +173,8 @@ def test_config_rejects_inconsistent_stages() -> None:
         LisConfig(vertical_weight=0.0)
     with pytest.raises(ValueError, match="four"):
         LisConfig(width_limits_px=((1.0, 2.0),))
+
+
+def test_gap_hold_ratio_is_checked() -> None:
+    with pytest.raises(ValueError, match="gap_hold_ratio"):
+        LisConfig(gap_hold_ratio=1.5)
