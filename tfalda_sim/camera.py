@@ -96,7 +96,7 @@ def _check_matrix(name: str, value: np.ndarray, shape: tuple[int, ...]) -> np.nd
     return arr
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # array fields: identity equality, hashable
 class FisheyeCamera:
     """A Kannala–Brandt fisheye camera: intrinsics ``K`` (3×3), distortion ``D``
     (k1..k4), image size [px] and its mount on the car."""

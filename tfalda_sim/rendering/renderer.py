@@ -551,7 +551,7 @@ class Renderer:
 def _noise_offset(frame_seed: int, pixels: int) -> int:
     """Where a frame reads the noise bank: a splitmix64 hash of its seed. The same offset
     for every window of a frame keeps the noise a function of the pixel."""
-    z = (frame_seed + 0x9E3779B97F4A7C15) & 0xFFFFFFFFFFFFFFFF
+    z = (int(frame_seed) + 0x9E3779B97F4A7C15) & 0xFFFFFFFFFFFFFFFF  # int: no int64 wrap
     z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & 0xFFFFFFFFFFFFFFFF
     z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & 0xFFFFFFFFFFFFFFFF
     return (z ^ (z >> 31)) % (NOISE_BANK_SIZE - pixels)

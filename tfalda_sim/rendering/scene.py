@@ -44,7 +44,7 @@ class Hall:
             raise ValueError("Hall.distance_m and Hall.height_m must be > 0")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # array fields: identity equality, hashable
 class Scene:
     """Render-ready data of one track. Build with ``build_scene``."""
 

@@ -233,3 +233,13 @@ def test_renderer_does_not_keep_old_scenes_alive(renderer: Renderer) -> None:
     del first
     gc.collect()
     assert ref() is None
+
+
+def test_numpy_frame_seeds_and_hashable_camera(renderer: Renderer) -> None:
+    track = load_named("straight")
+    scene = build_scene(track, Effects(noise_dn=4.0))
+    pose = lane_pose(track, 1.0)
+    big = np.int64(2**62 + 12345)  # the splitmix hash must not wrap in int64
+    assert np.array_equal(renderer.render(scene, pose, frame_seed=big),
+                          renderer.render(scene, pose, frame_seed=int(big)))
+    assert len({renderer.camera, renderer.camera, scene}) == 2
