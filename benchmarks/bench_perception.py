@@ -13,13 +13,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import sys
 import time
 
-import cv2
 import numpy as np
+from _machine import machine, pin_to_one_core
 from tqdm import tqdm
 
 from tfalda_sim.perception import DetectorConfig, TfaldaDetector
@@ -45,9 +43,7 @@ def _frames(n: int, quiet: bool) -> list[np.ndarray]:
 
 
 def run(n: int, quiet: bool) -> dict[str, object]:
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
-    cv2.setNumThreads(1)
+    pin_to_one_core()
     frames = _frames(n, quiet)
     presets = {"thesis": DetectorConfig.thesis(), "without LIS": DetectorConfig.without_lis(),
                "improved (2 rows)": DetectorConfig.improved(),
@@ -64,9 +60,7 @@ def run(n: int, quiet: bool) -> dict[str, object]:
         ms = 1000 * np.array(times)
         results[name] = {"median_ms": float(np.median(ms)), "p95_ms": float(np.percentile(ms, 95)),
                          "frames_per_s": float(1000 / np.median(ms)), "frames": len(ms)}
-    return {"machine": {"cores": os.cpu_count(), "pinned_to_one_core": True,
-                        "opencv_threads": cv2.getNumThreads(),
-                        "python": platform.python_version()},
+    return {"machine": machine(),
             "presets": results}
 
 

@@ -13,13 +13,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import sys
 import time
 
-import cv2
 import numpy as np
+from _machine import machine, pin_to_one_core
 from tqdm import tqdm
 
 from tfalda_sim.rendering import DomainRandomization, Effects, Renderer, build_scene
@@ -37,9 +35,7 @@ def _poses(track, n: int) -> list[tuple[float, float, float]]:
 
 
 def run(frames: int, quiet: bool) -> dict[str, object]:
-    if hasattr(os, "sched_setaffinity"):
-        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
-    cv2.setNumThreads(1)
+    pin_to_one_core()
     renderer = Renderer()
     tracks = [load_named("oval"), load_named("figure-eight"), generate(3), generate(5),
               generate(11)]
@@ -73,9 +69,7 @@ def run(frames: int, quiet: bool) -> dict[str, object]:
                          "full_frame_p95_ms": float(1000 * np.percentile(full_t, 95)),
                          "rois_median_ms": float(roi_ms), "roi_speedup": float(full_ms / roi_ms),
                          "frames": len(full_t)}
-    return {"machine": {"cores": os.cpu_count(), "pinned_to_one_core": True,
-                        "opencv_threads": cv2.getNumThreads(),
-                        "python": platform.python_version()},
+    return {"machine": machine(),
             "effects": results}
 
 
