@@ -75,7 +75,6 @@ class LaneInferenceSystem:
 
     def __init__(self, config: LisConfig, rows: int) -> None:
         self.config = config
-        self.n_rows = rows
         self.widths = np.zeros((rows, 2))  # y_{n−1}: last filtered widths [px]
         self.fault_count = 0
 

@@ -12,8 +12,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import Enum
 
-import numpy as np
-
 from .lane import Lane
 from .params import (
     INITIAL_ROIS,
@@ -189,7 +187,3 @@ def classify(left: Roi, right: Roi) -> DrivingState:
 def windows(rois: list[tuple[Roi, Roi]]) -> list[tuple[int, int, int, int]]:
     """The ROIs as ``(x, y, w, h)`` windows, row by row (top first), left before right."""
     return [roi.window() for pair in rois for roi in pair]
-
-
-def as_array(rois: list[tuple[Roi, Roi]]) -> np.ndarray:
-    return np.array(windows(rois), dtype=np.int32)
