@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import os
+import stat
 from pathlib import Path
 
 import pytest
@@ -97,3 +99,12 @@ def test_save_never_overwrites_unless_asked(tmp_path: Path) -> None:
     save_track(load_named("oval"), target, overwrite=True)
     assert load_track(target) == load_named("oval")
     assert [p.name for p in tmp_path.iterdir()] == ["mine.json"]  # no temp file left
+
+
+def test_saved_file_has_the_umask_permissions(tmp_path: Path) -> None:
+    umask = os.umask(0o022)
+    try:
+        path = save_track(load_named("straight"), tmp_path / "t.json")
+    finally:
+        os.umask(umask)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o644
