@@ -113,12 +113,15 @@ def frame_truth(track: Track, camera: FisheyeCamera, pose: tuple[float, float, f
         a_uv, a_ok = to_px(edges[li, 0, idx])
         b_uv, b_ok = to_px(edges[li, 1, idx])
         ok = a_ok & b_ok
-        for k in range(len(idx) - 1):
-            if idx[k + 1] != idx[k] + 1 or not (ok[k] and ok[k + 1]):
+        # One polygon per unbroken run of samples (a strip: one edge out, the other
+        # back): the same outline as the run's quads, drawn in one call.
+        sel = np.flatnonzero(ok)
+        for run in np.split(sel, np.flatnonzero(np.diff(idx[sel]) != 1) + 1):
+            if len(run) < 2:
                 continue
-            quad = np.array([a_uv[k], a_uv[k + 1], b_uv[k + 1], b_uv[k]])
-            cv2.fillConvexPoly(labels, np.rint(quad * 16).astype(np.int32), int(mark),
-                               lineType=cv2.LINE_8, shift=4)
+            strip = np.concatenate([a_uv[run], b_uv[run][::-1]])
+            cv2.fillPoly(labels, [np.rint(strip * 16).astype(np.int32)], int(mark),
+                         lineType=cv2.LINE_8, shift=4)
     bands: list[tuple[np.ndarray, Marking]] = []
     half_road = track.half_road_m
     if track.start_line_s_m is not None:
