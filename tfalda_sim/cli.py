@@ -20,6 +20,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from tfalda_sim.cli_common import CliError, check_outputs, seed_arg
 from tracks.fileformat import TrackFileError, load_track, save_track
 from tracks.generator import GeneratorParams, generate
 from tracks.model import Track
@@ -27,9 +28,7 @@ from tracks.named import NAMED_TRACKS, named_path
 from tracks.preview import write_preview
 from tracks.rules import MAT_EDGE_MARGIN_M, Violation, validate
 
-
-class CliError(Exception):
-    """Bad input: printed as ``error: …`` with exit code 2."""
+from .evaluation.command import add_evaluate_parser
 
 
 def track_summary(track: Track, violations: list[Violation]) -> dict[str, Any]:
@@ -156,13 +155,8 @@ def _cmd_render(args: argparse.Namespace) -> int:
         frame_truth,
     )
 
-    outputs = [p for p in (args.out, args.truth) if p is not None]
-    for p in outputs:
-        if p.suffix.lower() != ".png":
-            raise CliError(f"{p} must be a .png file")
-    existing = [str(p) for p in outputs if p.exists()]
-    if existing and not args.force:
-        raise CliError(f"{', '.join(existing)} exists; add --force to overwrite")
+    check_outputs({"out": args.out, "truth": args.truth}, {"out": ".png", "truth": ".png"},
+                  args.force)
     track = _load_track_arg(args.track)
     if not track.closed and not 0.0 <= args.s <= track.length_m:
         raise CliError(f"--s {args.s} m is outside the open track [0, {track.length_m:.2f}] m")
@@ -215,17 +209,6 @@ def _difficulty(text: str) -> float:
     return value
 
 
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"seed must be a non-negative integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"seed must be a non-negative integer, got {text!r}")
-    return value
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="tfalda-sim", description="Carolo-Cup lane-keeping simulator (tfalda-sim).")
@@ -235,7 +218,7 @@ def build_parser() -> argparse.ArgumentParser:
     track_sub = track.add_subparsers(dest="track_command", required=True)
 
     gen = track_sub.add_parser("generate", help="generate a track for a seed (scenario id)")
-    gen.add_argument("--seed", type=_seed, required=True, help="scenario id (≥ 0)")
+    gen.add_argument("--seed", type=seed_arg, required=True, help="scenario id (≥ 0)")
     gen.add_argument("--difficulty", type=_difficulty, default=GeneratorParams().difficulty,
                      help="0 (wide curves, clean markings) … 1 (tight curves, gaps, obstacles)")
     gen.add_argument("--out", type=Path, help="write the track file (JSON) here")
@@ -267,11 +250,13 @@ def build_parser() -> argparse.ArgumentParser:
                                                 "boundaries in green)")
     ren.add_argument("--effects", choices=("off", "default", "random"), default="default",
                      help="photometric effects (random: drawn with --seed)")
-    ren.add_argument("--seed", type=_seed, default=0,
+    ren.add_argument("--seed", type=seed_arg, default=0,
                      help="seed of the random effects, the scene layout and the sensor noise")
     ren.add_argument("--force", action="store_true", help="overwrite existing output files")
     ren.add_argument("--json", action="store_true", help="print one JSON object")
     ren.set_defaults(func=_cmd_render)
+
+    add_evaluate_parser(sub)
     return parser
 
 

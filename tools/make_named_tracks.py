@@ -10,16 +10,12 @@ import argparse
 import math
 import sys
 
+from tfalda_sim.evaluation.scenarios import THESIS_SPEED_M_S, THESIS_START_S_M
+from tfalda_sim.evaluation.trajectory import FRAME_RATE_HZ as THESIS_FPS
 from tracks.fileformat import save_track
 from tracks.model import Arc, Intersection, Pose, Straight, Track
 from tracks.named import NAMED_TRACKS, named_path
-from tracks.rules import min_centre_radius_m
-
-THESIS_SPEED_M_S = 15 / 3.6
-"""The thesis' recorded sequences simulate 15 km/h [m/s] (thesis 2.3.1; REFERENCE.md)."""
-
-THESIS_FPS = 50.0
-"""Camera frame rate [1/s] (thesis 1.1)."""
+from tracks.rules import LANE_WIDTH_M, min_centre_radius_m
 
 THESIS_LOOKAHEAD_M = 1.0
 """Distance [m] from the car to the middle of the ROIs: a frame "shows the curve" once the
@@ -30,12 +26,14 @@ def thesis_track() -> Track:
     """Straight → left curve → straight, laid out so that at 15 km/h and 50 frames/s,
     starting at s = 0.5 m, frames 0–80 show the straight, 81–160 the curve and 161–182
     the final straight (thesis figure 4.6's 183-frame run)."""
-    step = THESIS_SPEED_M_S / THESIS_FPS  # 0.0833 m per frame
-    first = 0.5 + 81 * step + THESIS_LOOKAHEAD_M
-    curve = 80 * step
+    step = THESIS_SPEED_M_S / THESIS_FPS  # 0.0833 m per frame, along the car's lane
+    first = THESIS_START_S_M + 81 * step + THESIS_LOOKAHEAD_M
+    # the car drives the right lane, outside the left curve: 80 steps on a radius 0.2 m
+    # larger than the centre line's
+    radius = 80 * step / math.pi - 0.5 * LANE_WIDTH_M
     last = 22 * step + 2.5  # the remaining frames plus the camera's look-ahead
     return Track(
-        (Straight(first), Arc(curve / math.pi, math.pi), Straight(last)),
+        (Straight(first), Arc(radius, math.pi), Straight(last)),
         closed=False, name="thesis",
         description=(
             "Thesis test drive (ch. 4, fig. 4.6): 183 frames at 15 km/h (scaled), 50 frames/s, "

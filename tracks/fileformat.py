@@ -29,8 +29,10 @@ import json
 import math
 import os
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 from .model import Arc, Gap, Intersection, Lane, Line, Obstacle, Pose, Straight, Track
 from .rules import validate
@@ -236,17 +238,16 @@ def load_track(path: str | os.PathLike[str], *, check_rules: bool = True) -> Tra
     return track
 
 
-def save_track(track: Track, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
-    """Write a track file atomically. An existing file is kept unless ``overwrite``."""
+@contextmanager
+def atomic_write(path: str | os.PathLike[str], mode: str = "w") -> Iterator[IO[Any]]:
+    """Write ``path`` through a temporary file in its folder (created if missing), put in
+    place in one step: a failed or interrupted write leaves an existing file untouched."""
     target = Path(path)
-    if target.exists() and not overwrite:
-        raise FileExistsError(f"{target} exists; pass overwrite=True (CLI: --force) to replace it")
     target.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(track_to_dict(track), indent=2, allow_nan=False) + "\n"
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
+        with os.fdopen(fd, mode, encoding=None if "b" in mode else "utf-8") as fh:
+            yield fh
         # mkstemp creates 0600; give the file the permissions a plain open() would.
         umask = os.umask(0)
         os.umask(umask)
@@ -255,4 +256,14 @@ def save_track(track: Track, path: str | os.PathLike[str], *, overwrite: bool = 
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def save_track(track: Track, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:
+    """Write a track file atomically. An existing file is kept unless ``overwrite``."""
+    target = Path(path)
+    if target.exists() and not overwrite:
+        raise FileExistsError(f"{target} exists; pass overwrite=True (CLI: --force) to replace it")
+    text = json.dumps(track_to_dict(track), indent=2, allow_nan=False) + "\n"
+    with atomic_write(target) as fh:
+        fh.write(text)
     return target

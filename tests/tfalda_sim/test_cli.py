@@ -95,3 +95,11 @@ def test_module_entry_point_runs() -> None:
     proc = subprocess.run([sys.executable, "-m", "tfalda_sim", "track", "list"],
                           capture_output=True, text=True, check=False)
     assert proc.returncode == 0 and "figure-eight" in proc.stdout
+
+
+def test_render_refuses_one_file_for_frame_and_truth(tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "f.png"
+    code, _, err = run(capsys, "render", "--track", "straight", "--s", "2", "--out", str(path),
+                       "--truth", str(path))
+    assert code == 2 and "same file" in err and not path.exists()

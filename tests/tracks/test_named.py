@@ -31,8 +31,9 @@ def test_left_curve_is_at_the_tightest_legal_radius() -> None:
 def test_thesis_track_matches_the_183_frame_run() -> None:
     track = load_named("thesis")
     step = THESIS_SPEED_M_S / THESIS_FPS
-    curve = track.segments[1].length_m
-    assert curve / step == pytest.approx(80)  # frames 81-160 show the curve
+    arc = track.segments[1]
+    lane_arc = (arc.radius_m + 0.5 * track.lane_width_m) * arc.angle_rad  # the right lane
+    assert lane_arc / step == pytest.approx(80)  # frames 81-160 show the curve
     assert isinstance(track.segments[1], Arc) and track.segments[1].angle_rad > 0
     assert track.length_m > 0.5 + 183 * step + 2.0  # room for all frames plus look-ahead
 
