@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 OUT    ?= out
 
-.PHONY: install demo test lint bench clean
+.PHONY: install demo test lint bench evaluation-docs clean
 
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -27,6 +27,17 @@ bench: install
 	$(BIN)/python benchmarks/bench_tracks.py
 	$(BIN)/python benchmarks/bench_render.py
 	$(BIN)/python benchmarks/bench_perception.py
+
+# The charts and figures of docs/evaluation.md (about 5 min on 2 cores).
+EV = docs/evaluation
+evaluation-docs: install
+	for s in straight curve track; do \
+	  $(BIN)/tfalda-sim evaluate --scenario $$s --plot $(EV)/$$s.png --json --force > $(EV)/$$s.json || exit 1; \
+	done
+	$(BIN)/tfalda-sim evaluate --scenario track --preset improved --plot $(EV)/track-improved.png --json --force > $(EV)/track-improved.json
+	$(BIN)/tfalda-sim evaluate --scenario random --seeds 0:50 --plot $(EV)/random-0-50.png --json --force > $(EV)/random-0-50.json
+	$(BIN)/tfalda-sim evaluate --scenario random --seeds 0:50 --ablation --plot $(EV)/ablation-0-50.png --json --force > $(EV)/ablation-0-50.json
+	$(BIN)/tfalda-sim evaluate --scenario random --seeds 0:50 --ablation --preset improved --plot $(EV)/ablation-improved-0-50.png --json --force > $(EV)/ablation-improved-0-50.json
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache

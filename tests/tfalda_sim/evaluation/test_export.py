@@ -110,7 +110,7 @@ def test_jsonl_holds_every_frame_of_every_run(runs: dict[str, RunResult],
         assert np.array_equal(lanes, run.lanes[k], equal_nan=True)
         assert rec["rois"] == run.rois[k].tolist()
     (tmp_path / "bad.jsonl").write_text('{"a": 1}\n{oops\n')
-    with pytest.raises(ValueError, match="bad.jsonl:2"):
+    with pytest.raises(ValueError, match=r"bad\.jsonl:2"):
         read_jsonl(tmp_path / "bad.jsonl")
 
 
