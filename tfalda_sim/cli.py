@@ -20,7 +20,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from tfalda_sim.cli_common import CliError, check_outputs, seed_arg
+from tfalda_sim.cli_common import CliError, check_outputs, finite_float_arg, seed_arg
 from tracks.fileformat import TrackFileError, load_track, save_track
 from tracks.generator import GeneratorParams, generate
 from tracks.model import Track
@@ -239,11 +239,11 @@ def build_parser() -> argparse.ArgumentParser:
     ren = sub.add_parser("render", help="render one camera frame of a track")
     ren.add_argument("--track", required=True,
                      help="named track, seed (generated track) or track file (.json)")
-    ren.add_argument("--s", type=float, required=True, help="arc length of the car [m]")
-    ren.add_argument("--lateral", type=float, default=-0.2,
+    ren.add_argument("--s", type=finite_float_arg, required=True, help="arc length of the car [m]")
+    ren.add_argument("--lateral", type=finite_float_arg, default=-0.2,
                      help="lateral offset from the centre line [m], left > 0 (default: the "
                           "middle of the right lane)")
-    ren.add_argument("--heading", type=float, default=0.0,
+    ren.add_argument("--heading", type=finite_float_arg, default=0.0,
                      help="heading relative to the road [rad], left > 0")
     ren.add_argument("--out", type=Path, required=True, help="frame PNG (752×480 grayscale)")
     ren.add_argument("--truth", type=Path, help="ground-truth PNG (labels in colour, ego lane "

@@ -34,6 +34,17 @@ def seed_range_arg(text: str) -> range:
     return range(a, b)
 
 
+def finite_float_arg(text: str) -> float:
+    """argparse type: a finite number (NaN and infinities are refused)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
 def positive_float_arg(text: str) -> float:
     """argparse type: a finite number > 0."""
     try:

@@ -103,3 +103,15 @@ def test_render_refuses_one_file_for_frame_and_truth(tmp_path: Path,
     code, _, err = run(capsys, "render", "--track", "straight", "--s", "2", "--out", str(path),
                        "--truth", str(path))
     assert code == 2 and "same file" in err and not path.exists()
+
+
+@pytest.mark.parametrize("option", ["--s", "--lateral", "--heading"])
+def test_render_refuses_non_finite_numbers(option: str, tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    argv = {"--s": "2", "--lateral": "-0.2", "--heading": "0"}
+    argv[option] = "nan"
+    with pytest.raises(SystemExit) as exc:
+        main(["render", "--track", "straight", "--out", str(tmp_path / "f.png"),
+              *[a for kv in argv.items() for a in kv]])
+    assert exc.value.code == 2
+    assert "finite" in capsys.readouterr().err

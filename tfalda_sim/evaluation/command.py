@@ -14,6 +14,7 @@ import numpy as np
 from ..cli_common import (
     CliError,
     check_outputs,
+    finite_float_arg,
     positive_float_arg,
     positive_int_arg,
     seed_range_arg,
@@ -51,7 +52,7 @@ def add_evaluate_parser(sub: Any) -> None:
                     help="run the LIS ablation: each stage off alone and on alone")
     ev.add_argument("--preset", choices=sorted(PRESETS), default="thesis",
                     help="the configuration of the run with the LIS (default: thesis)")
-    ev.add_argument("--epsilon-px", type=float, default=EPSILON_PX,
+    ev.add_argument("--epsilon-px", type=finite_float_arg, default=EPSILON_PX,
                     help=f"hit distance of the black-box test [px] (default {EPSILON_PX:g})")
     ev.add_argument("--speed", type=positive_float_arg, default=THESIS_SPEED_M_S,
                     help=f"car speed [m/s] (default {THESIS_SPEED_M_S:.3f}: 15 km/h)")

@@ -61,7 +61,7 @@ def test_random_seeds_and_ablation(tmp_path: Path, capsys: pytest.CaptureFixture
     (["--scenario", "random", "--seeds", "0:3", "--xml", "x.xml"], "single seed"),
     (["--scenario", "straight", "--ablation", "--no-lis"], "drop --no-lis"),
     (["--scenario", "straight", "--plot", "chart.jpg"], "must end in .png"),
-    (["--scenario", "straight", "--epsilon-px", "nan"], "--epsilon-px"),
+    (["--scenario", "straight", "--epsilon-px", "-1"], "--epsilon-px"),
 ])
 def test_bad_input_exits_2_with_the_reason(argv: list[str], message: str, tmp_path: Path,
                                            capsys: pytest.CaptureFixture[str],
@@ -72,7 +72,8 @@ def test_bad_input_exits_2_with_the_reason(argv: list[str], message: str, tmp_pa
 
 
 @pytest.mark.parametrize("argv", [["--scenario", "bend"], ["--scenario", "random", "--seeds",
-                                                           "5:2"], ["--speed", "-1"]])
+                                                           "5:2"], ["--speed", "-1"],
+                                  ["--scenario", "straight", "--epsilon-px", "nan"]])
 def test_argparse_rejects_unknown_values(argv: list[str],
                                          capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exc:
