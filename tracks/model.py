@@ -321,6 +321,10 @@ class Track:
         if not (math.isfinite(x_m) and math.isfinite(y_m)):
             raise ValueError(f"locate needs a finite point, got ({x_m!r}, {y_m!r})")
         hint = math.nan if s_hint_m is None else float(s_hint_m)
+        if s_hint_m is not None and not math.isfinite(hint):
+            raise ValueError(f"s_hint_m must be finite or None, got {s_hint_m!r}")
+        if self.closed:
+            hint = hint % self.length_m  # a hint from the next lap means the same place
         t = self.table
         g = self.index
         s, d, dist = locate_point(

@@ -107,6 +107,16 @@ def test_hint_picks_the_branch_at_a_crossing(eight: Track) -> None:
     assert abs(on_second.lateral_m) == pytest.approx(0.05, abs=1e-9)
 
 
+def test_hint_from_another_lap_means_the_same_place(eight: Track) -> None:
+    x = eight.intersections[0]
+    p = eight.position(x.s1_m + 0.05, -0.2)
+    for lap in (-2, -1, 1, 3):
+        loc = eight.locate(float(p[0]), float(p[1]), s_hint_m=x.s2_m + lap * eight.length_m)
+        assert abs(loc.s_m - x.s2_m) < 0.25  # the second branch, as with the plain hint
+    with pytest.raises(ValueError, match="s_hint_m must be finite"):
+        eight.locate(float(p[0]), float(p[1]), s_hint_m=float("inf"))
+
+
 def test_open_track_refuses_arc_length_outside() -> None:
     track = Track((Straight(2.0),), closed=False)
     with pytest.raises(ValueError, match="outside the open track"):
