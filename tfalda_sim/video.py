@@ -10,6 +10,8 @@ from types import TracebackType
 import cv2
 import numpy as np
 
+from tracks.fileformat import publish
+
 MP4_FOURCC = "mp4v"
 """The codec every OpenCV build can write into an MP4 container."""
 
@@ -67,10 +69,7 @@ class VideoWriter:
             self._writer.release()
             self._writer = None
         if keep and self.frames > 0:
-            umask = os.umask(0)  # mkstemp made the file 0600: give it open()'s permissions
-            os.umask(umask)
-            os.chmod(self._tmp, 0o666 & ~umask)
-            os.replace(self._tmp, self.path)
+            publish(self._tmp, self.path)
         else:
             self._tmp.unlink(missing_ok=True)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 from collections.abc import Mapping
@@ -22,7 +23,7 @@ from ..cli_common import (
 from ..perception import DetectorConfig, LaneObservation
 from ..rendering import FrameTruth
 from .metrics import EPSILON_PX
-from .runner import WITH_LIS, WITHOUT_LIS, RunResult, run_scenario
+from .runner import WITH_LIS, WITHOUT_LIS, run_scenario
 from .scenarios import (
     THESIS_SPEED_M_S,
     ScenarioKind,
@@ -104,10 +105,6 @@ def _check(args: argparse.Namespace) -> None:
     check_outputs({k: getattr(args, k) for k in _SUFFIXES}, _SUFFIXES, args.force)
 
 
-def _primary(runs: Mapping[str, RunResult]) -> RunResult:
-    return runs.get(WITH_LIS) or runs.get("all stages") or next(iter(runs.values()))
-
-
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from .charts import plot_ablation, plot_confidence, plot_seeds
     from .export import write_jsonl, write_lanes_xml
@@ -120,42 +117,34 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     out: dict[str, Any] = {"scenario": kind.value, "preset": args.preset,
                            "epsilon_px": args.epsilon_px, "speed_m_s": args.speed,
                            "stride": args.stride, "runs": list(configs)}
-    if kind is ScenarioKind.RANDOM:
+    if kind is ScenarioKind.RANDOM and len(args.seeds) > 1:
         per_seed = run_seeds(args.seeds, configs, workers=args.workers,
                              epsilon_px=args.epsilon_px, progress=progress,
                              speed_m_s=args.speed, stride=args.stride,
                              max_frames=args.max_frames)
+        single = None
+    else:
+        # one track: run it here, so a video records this very run
+        scenario = (generated_scenario(args.seeds.start, speed_m_s=args.speed,
+                                       stride=args.stride, max_frames=args.max_frames)
+                    if kind is ScenarioKind.RANDOM
+                    else thesis_scenario(kind, speed_m_s=args.speed, stride=args.stride))
+        hook, writer = (_video_hook(args.video, _primary_label(configs), args.stride)
+                        if args.video is not None else (None, contextlib.nullcontext()))
+        with writer:  # a failed run discards its video and keeps an existing file
+            single = run_scenario(scenario, configs, epsilon_px=args.epsilon_px,
+                                  progress=progress, on_frame=hook)
+        if args.video is not None:
+            out["video"] = str(args.video)
+        per_seed = [single]
+    if kind is ScenarioKind.RANDOM:
         out["seeds"] = [args.seeds.start, args.seeds.stop]
         out["per_seed"] = [run.summary() for runs in per_seed for run in runs.values()]
         out["pooled"] = {label: pooled_summary([runs[label] for runs in per_seed])
                          for label in configs}
-        all_runs = [run for runs in per_seed for run in runs.values()]
-        single = per_seed[0] if len(per_seed) == 1 else None
     else:
-        scenario = thesis_scenario(kind, speed_m_s=args.speed, stride=args.stride)
-        hook, writer = None, None
-        if args.video is not None:
-            hook, writer = _video_hook(args.video, _primary_label(configs), args.stride)
-        try:
-            single = run_scenario(scenario, configs, epsilon_px=args.epsilon_px,
-                                  progress=progress, on_frame=hook)
-        except BaseException:
-            if writer is not None:
-                writer.close(keep=False)
-            raise
-        if writer is not None:
-            writer.close()
-            out["video"] = str(args.video)
         out["summary"] = {label: run.summary() for label, run in single.items()}
-        all_runs = list(single.values())
-    if kind is ScenarioKind.RANDOM and single is not None and args.video is not None:
-        # the per-seed runner keeps no frames: render the single track again for the video
-        scenario = generated_scenario(args.seeds.start, speed_m_s=args.speed,
-                                      stride=args.stride, max_frames=args.max_frames)
-        hook, writer = _video_hook(args.video, _primary_label(configs), args.stride)
-        with writer:
-            run_scenario(scenario, configs, epsilon_px=args.epsilon_px, on_frame=hook)
-        out["video"] = str(args.video)
+    all_runs = [run for runs in per_seed for run in runs.values()]
     if args.plot is not None:
         if args.ablation:
             rows = [{"config": label, **(out["pooled"][label] if "pooled" in out
@@ -167,7 +156,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             plot_seeds(out["per_seed"], args.plot, title=_title(args))
         out["plot"] = str(args.plot)
     if args.xml is not None and single is not None:
-        write_lanes_xml(_primary(single), args.xml)
+        write_lanes_xml(single[_primary_label(single)], args.xml)
         out["xml"] = str(args.xml)
     if args.jsonl is not None:
         out["jsonl_lines"] = write_jsonl(all_runs, args.jsonl)
@@ -179,7 +168,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _primary_label(configs: Mapping[str, DetectorConfig]) -> str:
+def _primary_label(configs: Mapping[str, Any]) -> str:
+    """The run whose lanes go to the XML and the video: with LIS, else the first."""
     for label in (WITH_LIS, "all stages"):
         if label in configs:
             return label
