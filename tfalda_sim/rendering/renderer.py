@@ -126,13 +126,11 @@ _PAD = -8.0
 
 
 @njit(cache=True, error_model="numpy")
-def _atlas_maps(map_x: np.ndarray, map_y: np.ndarray, light_x: np.ndarray,
-                light_y: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+def _atlas_maps(map_x: np.ndarray, map_y: np.ndarray, rows: np.ndarray, cols: np.ndarray,
                 widths: np.ndarray, offsets: np.ndarray, coord_a: np.ndarray,
                 coord_b: np.ndarray, scale: np.ndarray, bias_x: np.ndarray,
                 bias_y: np.ndarray, flags: np.ndarray, affine: np.ndarray, size_x: float,
-                size_y: float, wall_shift: float, wall_cols: float, light_scale: float,
-                with_light: bool) -> None:
+                size_y: float, wall_shift: float, wall_cols: float) -> None:
     """Atlas coordinates (pixel centres at integers) of the requested row pieces, packed
     back to back: piece t is image row ``rows[t]``, columns ``cols[t]`` … + ``widths[t]``,
     written to the flat ``map_x`` and ``map_y`` from pixel ``offsets[t]`` on (planar maps:
@@ -152,9 +150,6 @@ def _atlas_maps(map_x: np.ndarray, map_y: np.ndarray, light_x: np.ndarray,
     shift = np.float32(wall_shift)
     wrap = np.float32(wall_cols)
     one = np.float32(1.0)
-    ls = np.float32(light_scale)
-    half = np.float32(0.5)
-    pad = np.float32(_PAD)
     end = 0
     for t in range(len(rows)):
         r = rows[t]
@@ -178,45 +173,74 @@ def _atlas_maps(map_x: np.ndarray, map_y: np.ndarray, light_x: np.ndarray,
             w = w - wrap * np.float32(w >= wrap)
             mx[j] = g * (x * sr[j]) + (one - g) * w + bxr[j]
             my[j] = g * (y * sr[j] + byr[j]) + (one - g) * br[j]
-        if with_light:
-            lx = light_x[start:start + width]
-            ly = light_y[start:start + width]
-            for j in range(width):
-                lx[j] = min(max(a00 * ar[j] + a01 * br[j] + a02, lo), hx) * ls - half
-                ly[j] = min(max(a10 * ar[j] + a11 * br[j] + a12, lo), hy) * ls - half
         end = max(end, start + width)
-    for j in range(end, len(map_x)):  # the tail that rounds the buffer up: reads 0
+    _pad_tail(map_x, map_y, end)
+
+
+@njit(cache=True, error_model="numpy")
+def _light_maps(light_x: np.ndarray, light_y: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                widths: np.ndarray, offsets: np.ndarray, coord_a: np.ndarray,
+                coord_b: np.ndarray, affine: np.ndarray, size_x: float, size_y: float,
+                light_scale: float) -> None:
+    """Light-map coordinates of the pieces' ground hits, packed as in ``_atlas_maps``
+    (level-0 texel coordinates scaled by ``light_scale``, texel centres at integers)."""
+    a00, a01, a02, a10, a11, a12 = (np.float32(affine[0]), np.float32(affine[1]),
+                                    np.float32(affine[2]), np.float32(affine[3]),
+                                    np.float32(affine[4]), np.float32(affine[5]))
+    lo = np.float32(-2.0)
+    hx = np.float32(size_x + 1.0)
+    hy = np.float32(size_y + 1.0)
+    ls = np.float32(light_scale)
+    half = np.float32(0.5)
+    end = 0
+    for t in range(len(rows)):
+        ar = coord_a[rows[t], cols[t]:cols[t] + widths[t]]
+        br = coord_b[rows[t], cols[t]:cols[t] + widths[t]]
+        lx = light_x[offsets[t]:offsets[t] + widths[t]]
+        ly = light_y[offsets[t]:offsets[t] + widths[t]]
+        for j in range(widths[t]):
+            lx[j] = min(max(a00 * ar[j] + a01 * br[j] + a02, lo), hx) * ls - half
+            ly[j] = min(max(a10 * ar[j] + a11 * br[j] + a12, lo), hy) * ls - half
+        end = max(end, offsets[t] + widths[t])
+    _pad_tail(light_x, light_y, end)
+
+
+@njit(cache=True)
+def _pad_tail(map_x: np.ndarray, map_y: np.ndarray, end: int) -> None:
+    """The tail that rounds the buffers up to whole rows reads 0."""
+    pad = np.float32(_PAD)
+    for j in range(end, len(map_x)):
         map_x[j] = pad
         map_y[j] = pad
-    if with_light:
-        for j in range(end, len(light_x)):
-            light_x[j] = pad
-            light_y[j] = pad
+
+
+def _combine_params(params: np.ndarray) -> tuple:
+    """The combine passes' constants from ``params`` (mat, line, wall, bonnet [DN],
+    bonnet reflectivity [-], noise σ [DN], ceiling [DN]) as float32."""
+    f32 = np.float32
+    return (f32(params[0]), f32((params[1] - params[0]) / 255.0), f32(params[2] / 128.0),
+            f32(params[3]), f32(params[4]), f32(params[5] / 16.0), f32(params[6]))
+
+
+_combine_params_jit = njit(cache=True)(_combine_params)
 
 
 @njit(cache=True, error_model="numpy")
 def _combine(out: np.ndarray, out_offsets: np.ndarray, rows: np.ndarray, cols: np.ndarray,
-             widths: np.ndarray, tex_offsets: np.ndarray, tex: np.ndarray, light: np.ndarray,
-             with_light: bool,
-             overlay: np.ndarray, overlay_mask: np.ndarray, overlay_x0: int, overlay_y0: int,
-             with_overlay: bool, flags: np.ndarray, gain: np.ndarray, sheen: np.ndarray,
-             noise: np.ndarray, noise_offset: int, image_width: int, params: np.ndarray) -> None:
+             widths: np.ndarray, tex_offsets: np.ndarray, tex: np.ndarray, flags: np.ndarray,
+             gain: np.ndarray, sheen: np.ndarray, noise: np.ndarray, noise_offset: int,
+             image_width: int, params: np.ndarray) -> None:
     """Final grey levels of the row pieces, written to the flat ``out`` from
     ``out_offsets[t]`` on, from the sampled atlas ``tex`` (paint coverage on the ground, wall
-    texture elsewhere) read from ``tex_offsets[t]`` on (flat ``light`` alike).
-    ``flags``: 1 ground, 2 bonnet, 4 ceiling."""
-    mat = np.float32(params[0])
-    k_line = np.float32((params[1] - params[0]) / 255.0)
-    wall_k = np.float32(params[2] / 128.0)
-    bonnet_dn = np.float32(params[3])
-    refl = np.float32(params[4])
-    sigma = np.float32(params[5] / 16.0)
-    ceiling = np.float32(params[6])
+    texture elsewhere) read from ``tex_offsets[t]`` on. ``flags``: 1 ground, 2 bonnet,
+    4 ceiling. Branch-free so that it vectorises (0/1 factors blend exactly); the rare
+    cases have their own passes (``_combine_lit``, ``_paint_obstacles``), which keeps this
+    loop short: pieces of ROIs are only 150–180 px wide."""
+    mat, k_line, wall_k, bonnet_dn, refl, sigma, ceiling = _combine_params_jit(params)
     zero = np.float32(0.0)
     one = np.float32(1.0)
     top = np.float32(255.0)
     half = np.float32(0.5)
-    inv255 = np.float32(1.0 / 255.0)
     for t in range(len(rows)):
         r = rows[t]
         c0 = cols[t]
@@ -226,47 +250,124 @@ def _combine(out: np.ndarray, out_offsets: np.ndarray, rows: np.ndarray, cols: n
         sh = sheen[r, c0:c0 + width]
         start = noise_offset + r * image_width + c0
         nz = noise[start:start + width]
-        li = tex_offsets[t]
-        tx = tex[li:li + width]
+        tx = tex[tex_offsets[t]:tex_offsets[t] + width]
         o = out[out_offsets[t]:out_offsets[t] + width]
-        o_row = r - overlay_y0
-        o_hit = with_overlay and 0 <= o_row < overlay_mask.shape[0] and (
-            c0 < overlay_x0 + overlay_mask.shape[1] and c0 + width > overlay_x0)
-        if not (with_light or o_hit):
-            # Fast path, branch-free so that it vectorises: 0/1 factors blend exactly.
-            for j in range(width):
-                f = fl[j]
-                is_g = np.float32(f & 1)
-                is_b = np.float32((f >> 1) & 1)
-                is_c = np.float32((f >> 2) & 1)
-                value = np.float32(tx[j])
-                w = is_c * ceiling + (one - is_c) * (wall_k * value)
-                v = is_g * (mat + k_line * value + np.float32(sh[j])) + (one - is_g) * w
-                v = is_b * (bonnet_dn + refl * v) + (one - is_b) * v
-                v = v * ga[j] + sigma * np.float32(nz[j])
-                o[j] = np.uint8(min(max(v, zero), top) + half)
-            continue
         for j in range(width):
             f = fl[j]
+            is_g = np.float32(f & 1)
+            is_b = np.float32((f >> 1) & 1)
+            is_c = np.float32((f >> 2) & 1)
             value = np.float32(tx[j])
+            w = is_c * ceiling + (one - is_c) * (wall_k * value)
+            v = is_g * (mat + k_line * value + np.float32(sh[j])) + (one - is_g) * w
+            v = is_b * (bonnet_dn + refl * v) + (one - is_b) * v
+            v = v * ga[j] + sigma * np.float32(nz[j])
+            o[j] = np.uint8(min(max(v, zero), top) + half)
+
+
+@njit(cache=True, error_model="numpy")
+def _combine_lit(out: np.ndarray, out_offsets: np.ndarray, rows: np.ndarray,
+                 cols: np.ndarray, widths: np.ndarray, tex_offsets: np.ndarray,
+                 tex: np.ndarray, light: np.ndarray, flags: np.ndarray, gain: np.ndarray,
+                 sheen: np.ndarray, noise: np.ndarray, noise_offset: int, image_width: int,
+                 params: np.ndarray) -> None:
+    """``_combine`` with the light map: the flat ``light`` holds per sampled pixel the
+    multiplier (×255) and the additive glare [DN] of the floor (shadows, glare spots)."""
+    mat, k_line, wall_k, bonnet_dn, refl, sigma, ceiling = _combine_params_jit(params)
+    zero = np.float32(0.0)
+    top = np.float32(255.0)
+    half = np.float32(0.5)
+    inv255 = np.float32(1.0 / 255.0)
+    for t in range(len(rows)):
+        r = rows[t]
+        c0 = cols[t]
+        li = tex_offsets[t]
+        start = noise_offset + r * image_width + c0
+        o0 = out_offsets[t]
+        for j in range(widths[t]):
+            f = flags[r, c0 + j]
+            value = np.float32(tex[li + j])
             if f & 1:
-                v = mat + k_line * value
-                if with_light:
-                    v = v * (np.float32(light[2 * (li + j)]) * inv255) + np.float32(
-                        light[2 * (li + j) + 1])
-                v = v + np.float32(sh[j])
+                v = (mat + k_line * value) * (np.float32(light[2 * (li + j)]) * inv255)
+                v = v + np.float32(light[2 * (li + j) + 1]) + np.float32(sheen[r, c0 + j])
             elif f & 4:
                 v = ceiling
             else:
                 v = wall_k * value
-            if o_hit and not f & 2:
-                oc = c0 + j - overlay_x0
-                if 0 <= oc < overlay_mask.shape[1] and overlay_mask[o_row, oc]:
-                    v = overlay[o_row, oc]
             if f & 2:
                 v = bonnet_dn + refl * v
-            v = v * ga[j] + sigma * np.float32(nz[j])
-            o[j] = np.uint8(min(max(v, zero), top) + half)
+            v = v * gain[r, c0 + j] + sigma * np.float32(noise[start + j])
+            out[o0 + j] = np.uint8(min(max(v, zero), top) + half)
+
+
+@njit(cache=True, error_model="numpy")
+def _paint_obstacles(out: np.ndarray, out_offsets: np.ndarray, rows: np.ndarray,
+                     cols: np.ndarray, widths: np.ndarray, ids: np.ndarray,
+                     shades: np.ndarray, x0: int, y0: int, flags: np.ndarray,
+                     gain: np.ndarray, noise: np.ndarray, noise_offset: int,
+                     image_width: int, params: np.ndarray) -> None:
+    """Write the obstacles over the combined pieces: ``ids`` (image pixel ``(x0, y0)`` on)
+    holds the index of the face seen at a pixel into ``shades`` [DN], 0 for none. The
+    bonnet stays in front of them."""
+    sigma = _combine_params_jit(params)[5]
+    zero = np.float32(0.0)
+    top = np.float32(255.0)
+    half = np.float32(0.5)
+    for t in range(len(rows)):
+        ir = rows[t] - y0
+        c0 = cols[t]
+        if not 0 <= ir < ids.shape[0]:
+            continue
+        j0 = max(x0 - c0, 0)
+        j1 = min(x0 + ids.shape[1] - c0, widths[t])
+        start = noise_offset + rows[t] * image_width + c0
+        for j in range(j0, j1):
+            face = ids[ir, c0 + j - x0]
+            if face and not flags[rows[t], c0 + j] & 2:
+                v = shades[face] * gain[rows[t], c0 + j] + sigma * np.float32(noise[start + j])
+                out[out_offsets[t] + j] = np.uint8(min(max(v, zero), top) + half)
+
+
+@njit(cache=True)
+def _pack_pieces(boxes: np.ndarray, reads: np.ndarray, cuts: np.ndarray
+                 ) -> tuple[np.ndarray, int]:
+    """Cut every row of the windows ``boxes`` ``(k, 4)`` (x, y, w, h) [px] into runs of
+    pixels that read the atlas (``reads``) and runs of nothing but ceiling, which are not
+    sampled; ``cuts[r]`` lists the columns where row r switches between them, padded with
+    the image width. Returns ``(5, n)``: row, first column, width, offset in the output
+    and offset in the sampled buffer (−1 for ceiling runs) of each piece, and the sampled
+    total."""
+    n = 0
+    for k in range(boxes.shape[0]):
+        x0, y0, w, h = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3]
+        for r in range(y0, y0 + h):
+            n += 1
+            for c in cuts[r]:
+                n += x0 < c < x0 + w
+    out = np.empty((5, n), np.int64)
+    t = 0
+    out_at = 0
+    tex_at = 0
+    for k in range(boxes.shape[0]):
+        x0, y0, w, h = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3]
+        for r in range(y0, y0 + h):
+            start = x0
+            for i in range(cuts.shape[1] + 1):
+                c = x0 + w if i == cuts.shape[1] else cuts[r, i]
+                if c <= start:
+                    continue
+                end = min(c, x0 + w)
+                width = end - start
+                sampled = reads[r, start]
+                out[0, t], out[1, t], out[2, t], out[3, t] = r, start, width, out_at
+                out[4, t] = tex_at if sampled else -1
+                tex_at += width if sampled else 0
+                out_at += width
+                t += 1
+                start = end
+                if start == x0 + w:
+                    break
+    return out, tex_at
 
 
 _PACK = 1024
@@ -278,7 +379,7 @@ class _Stack:
     """The requested windows' row pieces, packed back to back (no padding): piece t is
     image row ``rows[t]``, columns ``cols[t]`` … + ``widths[t]``; its output starts at
     ``out_offsets[t]``, its atlas sample at ``tex_offsets[t]``. The ``s_*`` arrays list the
-    pieces that sample the atlas (rows of nothing but ceiling do not)."""
+    pieces that sample the atlas (pieces of nothing but ceiling do not)."""
 
     rows: np.ndarray
     cols: np.ndarray
@@ -305,7 +406,19 @@ class _Layout:
     bias_x: np.ndarray  # ground: level offset in the atlas; walls: the wall's atlas column
     bias_y: np.ndarray
     flags: np.ndarray  # uint8: 1 ground, 2 bonnet, 4 ceiling
-    sampled_rows: np.ndarray  # bool per image row: has a pixel that reads the atlas
+    reads_atlas: np.ndarray  # bool per pixel: not ceiling (a constant grey)
+    cuts: np.ndarray  # per row: columns where reads_atlas switches, padded with the width
+
+
+def _switch_columns(mask: np.ndarray) -> np.ndarray:
+    """Per row of ``mask``, the columns where it changes value, padded with the width."""
+    h, w = mask.shape
+    switch = mask[:, 1:] != mask[:, :-1]
+    cuts = np.full((h, max(1, int(switch.sum(axis=1).max()))), w, np.int64)
+    for r in range(h):
+        found = np.flatnonzero(switch[r]) + 1
+        cuts[r, :len(found)] = found
+    return cuts
 
 
 class Renderer:
@@ -380,8 +493,27 @@ class Renderer:
             bias_y=np.where(is_ground, 0.5 * level_scale - 0.5 + origin[level, 1], 0.0
                             ).astype(f32),
             flags=flags,
-            sampled_rows=~np.all(flags == 4, axis=1),
+            reads_atlas=flags != 4,
+            cuts=_switch_columns(flags != 4),
         )
+
+    def _buffers(self, st: _Stack, with_light: bool
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Scratch arrays for a packing: planar atlas maps, light maps, the sampled light
+        and the sampled atlas, whose tail past the sampled pixels stays 0 (ceiling
+        pieces read it)."""
+        key = ("pass", st.tex_rows, st.zero_len, with_light)
+        bufs = self._scratch.get(key)
+        if bufs is None:
+            n_tex = st.tex_rows * _PACK
+            if len(self._scratch) > 64:
+                self._scratch.clear()
+            bufs = self._scratch[key] = (
+                np.empty((2, st.tex_rows, _PACK), np.float32),
+                np.empty((2, st.tex_rows, _PACK) if with_light else (2, 1, 1), np.float32),
+                np.empty((n_tex + st.zero_len, 2) if with_light else (1, 2), np.uint8),
+                np.zeros(n_tex + st.zero_len, np.uint8))
+        return bufs
 
     def _buffer(self, name: str, shape: tuple[int, ...], dtype: type) -> np.ndarray:
         """A reusable scratch array (fresh large arrays cost page faults every frame)."""
@@ -445,32 +577,28 @@ class Renderer:
         gain, sheen, params = self._maps_for(fx)
         st = self._stack(boxes, layout, layout_key)
         blur_m = speed_m_s * fx.motion_blur_s
-        shifts = np.linspace(0.0, blur_m, MOTION_BLUR_SAMPLES) if blur_m > 0 else np.zeros(1)
+        shifts = np.linspace(0.0, blur_m, MOTION_BLUR_SAMPLES) if blur_m > 0 else (0.0,)
         blur = len(shifts) > 1
         with_light = scene.light is not None
         n_tex = st.tex_rows * _PACK  # sampled pixels, rounded up to whole rows of _PACK
-        maps = self._buffer("maps", (2, st.tex_rows, _PACK), np.float32)  # planar x, y
-        light_maps = self._buffer("light_maps", (2, st.tex_rows, _PACK) if with_light
-                                  else (2, 1, 1), np.float32)
-        light = self._buffer("light", (n_tex + st.zero_len, 2) if with_light else (1, 2),
-                             np.uint8)
-        tex = self._buffer("tex", (n_tex + st.zero_len,), np.uint8)
-        tex[n_tex:] = 0  # read by the rows that show nothing but ceiling
+        maps, light_maps, light, tex = self._buffers(st, with_light)
         if blur:
             total = self._buffer("tex_sum", (n_tex + st.zero_len,), np.float32)
             total.fill(0.0)
         wall_shift = (yaw % (2 * math.pi)) * (scene.hall.distance_m / WALL_TEXEL_M)
+        size_x, size_y = float(scene.level0_size[0]), float(scene.level0_size[1])
         for k, back in enumerate(shifts):
             if not st.tex_rows:
                 break
             affine = self._affine(scene, x - back * math.cos(yaw), y - back * math.sin(yaw), yaw)
-            _atlas_maps(maps[0].reshape(-1), maps[1].reshape(-1), light_maps[0].reshape(-1),
-                        light_maps[1].reshape(-1), st.s_rows, st.s_cols,
-                        st.s_widths, st.s_offsets, layout.coord_a, layout.coord_b,
-                        layout.scale, layout.bias_x, layout.bias_y, layout.flags, affine,
-                        float(scene.level0_size[0]), float(scene.level0_size[1]), wall_shift,
-                        float(scene.wall_size[0]), scene.resolution_m / LIGHT_RES_M,
-                        with_light and k == 0)
+            maps_args = (st.s_rows, st.s_cols, st.s_widths, st.s_offsets, layout.coord_a,
+                         layout.coord_b)
+            _atlas_maps(maps[0].reshape(-1), maps[1].reshape(-1), *maps_args, layout.scale,
+                        layout.bias_x, layout.bias_y, layout.flags, affine, size_x, size_y,
+                        wall_shift, float(scene.wall_size[0]))
+            if with_light and k == 0:
+                _light_maps(light_maps[0].reshape(-1), light_maps[1].reshape(-1), *maps_args,
+                            affine, size_x, size_y, scene.resolution_m / LIGHT_RES_M)
             cv2.remap(scene.atlas, maps[0], maps[1], cv2.INTER_LINEAR,
                       dst=tex[:n_tex].reshape(st.tex_rows, _PACK),
                       borderMode=cv2.BORDER_CONSTANT, borderValue=0)
@@ -482,16 +610,22 @@ class Renderer:
                           borderMode=cv2.BORDER_REPLICATE)
         sampled = total * np.float32(1.0 / len(shifts)) if blur else tex
         full_frame = len(boxes) == 1 and boxes[0] == (0, 0, width, height)
-        faces = obstacle_faces(self.camera, box_faces, (x, y, yaw), fx.line_dn,
-                               scene.hall.distance_m, None if full_frame else boxes)
-        drawn = _draw_faces(faces, width, height)
-        (ox0, oy0), overlay, mask = drawn if drawn is not None else (
-            (0, 0), np.zeros((1, 1), np.float32), np.zeros((1, 1), np.uint8))
+        uv, bbox, shading = visible_faces(self.camera, box_faces, (x, y, yaw),
+                                          scene.hall.distance_m, None if full_frame else boxes)
+        drawn = _draw_faces(uv, bbox, fx.line_dn * shading, width, height)
         out = np.empty(st.out_len, np.uint8)
-        _combine(out, st.out_offsets, st.rows, st.cols, st.widths, st.tex_offsets, sampled,
-                 light.reshape(-1), with_light, overlay, mask, ox0, oy0, drawn is not None,
-                 layout.flags, gain, sheen, self._noise,
-                 _noise_offset(frame_seed, width * height), width, params)
+        noise_offset = _noise_offset(frame_seed, width * height)
+        pieces = (out, st.out_offsets, st.rows, st.cols, st.widths)
+        if with_light:
+            _combine_lit(*pieces, st.tex_offsets, sampled, light.reshape(-1), layout.flags,
+                         gain, sheen, self._noise, noise_offset, width, params)
+        else:
+            _combine(*pieces, st.tex_offsets, sampled, layout.flags, gain, sheen, self._noise,
+                     noise_offset, width, params)
+        if drawn is not None:
+            (ox0, oy0), ids, shades = drawn
+            _paint_obstacles(*pieces, ids, shades, ox0, oy0, layout.flags, gain, self._noise,
+                             noise_offset, width, params)
         return [out[o:o + ww * wh].reshape(wh, ww)
                 for o, (_, _, ww, wh) in zip(st.window_offsets, boxes, strict=True)]
 
@@ -516,24 +650,20 @@ class Renderer:
         cached = self._stacks.get(key)
         if cached is not None:
             return cached
-        heights = np.array([wh for _, _, _, wh in boxes])
-        rows = np.concatenate([np.arange(wy0, wy0 + wh) for _, wy0, _, wh in boxes])
-        cols = np.repeat(np.array([wx0 for wx0, _, _, _ in boxes]), heights)
-        widths = np.repeat(np.array([ww for _, _, ww, _ in boxes]), heights)
-        out_offsets = np.concatenate(([0], np.cumsum(widths)[:-1]))
-        sampled = layout.sampled_rows[rows]
-        s_widths = widths[sampled]
-        s_offsets = np.concatenate(([0], np.cumsum(s_widths)[:-1])).astype(np.int64)
-        tex_rows = -(-int(s_widths.sum()) // _PACK)
-        tex_offsets = np.full(len(rows), tex_rows * _PACK, np.int64)  # the zero tail
-        tex_offsets[sampled] = s_offsets
-        window_offsets = np.concatenate(([0], np.cumsum(heights * np.array(
-            [ww for _, _, ww, _ in boxes]))[:-1]))
+        pieces, n_sampled = _pack_pieces(np.array(boxes, np.int64), layout.reads_atlas,
+                                          layout.cuts)
+        rows, cols, widths, out_offsets, tex_offsets = pieces
+        sampled = tex_offsets >= 0
+        tex_rows = -(-n_sampled // _PACK)
+        s_offsets = tex_offsets[sampled]
+        tex_offsets[~sampled] = tex_rows * _PACK  # ceiling pieces read the zero tail
+        window_offsets = np.cumsum([0] + [ww * wh for _, _, ww, wh in boxes[:-1]])
         stack = _Stack(rows=rows, cols=cols, widths=widths, out_offsets=out_offsets,
                        tex_offsets=tex_offsets, s_rows=rows[sampled], s_cols=cols[sampled],
-                       s_widths=s_widths, s_offsets=s_offsets, tex_rows=tex_rows,
-                       zero_len=int(widths.max()), out_len=int(widths.sum()),
-                       window_offsets=[int(o) for o in window_offsets])
+                       s_widths=widths[sampled], s_offsets=s_offsets, tex_rows=tex_rows,
+                       zero_len=max(ww for _, _, ww, _ in boxes),
+                       out_len=int(out_offsets[-1] + widths[-1]),
+                       window_offsets=window_offsets.tolist())
         if len(self._stacks) >= 32:
             self._stacks.pop(next(iter(self._stacks)))
         self._stacks[key] = stack
@@ -561,12 +691,14 @@ def _noise_offset(frame_seed: int, pixels: int) -> int:
 class BoxFaces:
     """The five visible-capable faces (no bottom) of obstacle boxes, precomputed once:
     outlines ``(n, 5, 4·OBSTACLE_EDGE_STEPS, 3)``, outward normals and face centres
-    ``(n, 5, 3)`` and box centres ``(n, 3)`` [m]."""
+    ``(n, 5, 3)``, box centres ``(n, 3)`` [m] and each face's brightness under the hall's
+    light relative to white ``(n, 5)`` [-]."""
 
     outlines: np.ndarray
     normals: np.ndarray
     mids: np.ndarray
     centres: np.ndarray
+    shading: np.ndarray
 
     @classmethod
     def of(cls, boxes: np.ndarray) -> BoxFaces:
@@ -584,75 +716,151 @@ class BoxFaces:
         centres = boxes.mean(axis=1)
         flip = np.einsum("nfk,nfk->nf", normals, mids - centres[:, None]) < 0
         normals[flip] *= -1.0
-        return cls(outlines, normals, mids, centres)
+        shading = 0.72 + 0.28 * np.maximum(0.0, normals @ _LIGHT_DIR)
+        return cls(np.ascontiguousarray(outlines), normals, mids, centres, shading)
 
 
 _LIGHT_DIR = np.array([0.3, -0.5, 0.81]) / np.linalg.norm([0.3, -0.5, 0.81])
 
 
-def obstacle_faces(camera: FisheyeCamera, faces: BoxFaces, pose: tuple[float, float, float],
-                   white_dn: float = 255.0, max_distance_m: float = Hall().distance_m,
-                   windows: list[tuple[int, int, int, int]] | None = None
-                   ) -> list[tuple[np.ndarray, float]]:
-    """Faces of the obstacle boxes the camera sees, as image polygons [px] with a grey
-    level (white carton lit from above), farthest first (painter's order). Boxes beyond
-    ``max_distance_m`` stand behind the hall's walls; faces reaching behind the lens are
-    left out. With ``windows`` [(x, y, w, h) px], faces whose image bounding box touches
-    none of them are left out too (they cannot change a requested pixel)."""
+@njit(cache=True, error_model="numpy")
+def _project_faces(outlines: np.ndarray, normals: np.ndarray, mids: np.ndarray,
+                   centres: np.ndarray, pose_x: float, pose_y: float, yaw: float,
+                   mount_rot: np.ndarray, mount_pos: np.ndarray, K: np.ndarray,
+                   D: np.ndarray, max_distance_m: float, windows: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Image outlines ``(n, 5, P, 2)`` [px] of the box faces seen from a car at ``(pose_x,
+    pose_y)`` [m] heading ``yaw`` [rad] by a camera with the mount's car → camera
+    rotation and position [m] (as ``FisheyeCamera.world_to_camera``), their bounding boxes
+    ``(n, 5, 4)`` (u_min, v_min, u_max, v_max) [px], whether each face is drawn ``(n, 5)``
+    and each box's distance from the camera [m]. A face is drawn when its box
+    is within ``max_distance_m``, it faces the camera, all its outline lies in front of
+    the lens, and (if ``windows`` ``(k, 4)`` is not empty) its image bounding box, ±2 px
+    for the fill's rounding, touches a window. Same formulas as ``FisheyeCamera.project``
+    (one loop instead of a dozen temporary arrays: this runs every frame)."""
+    n, n_faces, n_pts = outlines.shape[0], outlines.shape[1], outlines.shape[2]
+    c, s = math.cos(yaw), math.sin(yaw)
+    world_to_car = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    rot = np.zeros((3, 3))  # mount_rot @ world_to_car (no BLAS in numba without SciPy)
+    origin = np.array([pose_x, pose_y, 0.0])  # + world_to_car.T @ mount_pos: camera [m]
+    for i in range(3):
+        for j in range(3):
+            for k in range(3):
+                rot[i, j] += mount_rot[i, k] * world_to_car[k, j]
+            origin[i] += world_to_car[j, i] * mount_pos[j]
+    uv = np.full((n, n_faces, n_pts, 2), np.nan)
+    bbox = np.zeros((n, n_faces, 4))
+    keep = np.zeros((n, n_faces), np.bool_)
+    dist = np.empty(n)
+    k1, k2, k3, k4 = D[0], D[1], D[2], D[3]
+    for b in range(n):
+        d0 = centres[b, 0] - origin[0]
+        d1 = centres[b, 1] - origin[1]
+        d2 = centres[b, 2] - origin[2]
+        dist[b] = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        if dist[b] > max_distance_m:
+            continue
+        for f in range(n_faces):
+            facing = 0.0
+            for k in range(3):
+                facing += normals[b, f, k] * (origin[k] - mids[b, f, k])
+            if facing <= 0.0:
+                continue
+            ok = True
+            u_lo, v_lo, u_hi, v_hi = np.inf, np.inf, -np.inf, -np.inf
+            for p in range(n_pts):
+                q0 = outlines[b, f, p, 0] - origin[0]
+                q1 = outlines[b, f, p, 1] - origin[1]
+                q2 = outlines[b, f, p, 2] - origin[2]
+                x = rot[0, 0] * q0 + rot[0, 1] * q1 + rot[0, 2] * q2
+                y = rot[1, 0] * q0 + rot[1, 1] * q1 + rot[1, 2] * q2
+                z = rot[2, 0] * q0 + rot[2, 1] * q1 + rot[2, 2] * q2
+                if z <= 0.02:
+                    ok = False
+                    break
+                r = math.hypot(x, y)
+                theta = math.atan2(r, z)
+                t2 = theta * theta
+                theta_d = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+                scale = theta_d / r if r > 1e-12 else 1.0 / z
+                xd, yd = x * scale, y * scale
+                u = K[0, 0] * (xd + K[0, 1] / K[0, 0] * yd) + K[0, 2]
+                v = K[1, 1] * yd + K[1, 2]
+                uv[b, f, p, 0] = u
+                uv[b, f, p, 1] = v
+                u_lo, u_hi = min(u_lo, u), max(u_hi, u)
+                v_lo, v_hi = min(v_lo, v), max(v_hi, v)
+            if not ok:
+                continue
+            touches = windows.shape[0] == 0
+            for w in range(windows.shape[0]):
+                if (u_hi + 2.0 >= windows[w, 0] and u_lo - 2.0 < windows[w, 0] + windows[w, 2]
+                        and v_hi + 2.0 >= windows[w, 1]
+                        and v_lo - 2.0 < windows[w, 1] + windows[w, 3]):
+                    touches = True
+                    break
+            keep[b, f] = touches
+            bbox[b, f, 0], bbox[b, f, 1], bbox[b, f, 2], bbox[b, f, 3] = u_lo, v_lo, u_hi, v_hi
+    return uv, bbox, keep, dist
+
+
+_NO_WINDOWS = np.zeros((0, 4))
+_NO_FACES = (np.zeros((0, 4 * OBSTACLE_EDGE_STEPS, 2)), np.zeros((0, 4)), np.zeros(0))
+
+
+def visible_faces(camera: FisheyeCamera, faces: BoxFaces, pose: tuple[float, float, float],
+                  max_distance_m: float = Hall().distance_m,
+                  windows: tuple[tuple[int, int, int, int], ...] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The obstacle faces a camera on a car at ``pose`` sees, farthest box first (painter's
+    order): image outlines ``(m, P, 2)`` [px], their bounding boxes ``(m, 4)`` and their
+    brightness relative to white ``(m,)``. Boxes beyond ``max_distance_m`` stand behind
+    the hall's walls; faces reaching behind the lens are left out. With ``windows``
+    [(x, y, w, h) px], faces whose image bounding box touches none of them are left out
+    too (they cannot change a requested pixel)."""
     if len(faces.centres) == 0:
-        return []
-    x, y, yaw = pose
-    cam_world = np.array([x + math.cos(yaw) * camera.mount.forward_m,
-                          y + math.sin(yaw) * camera.mount.forward_m, camera.mount.height_m])
-    d = faces.centres - cam_world
-    dist = np.sqrt(np.einsum("nk,nk->n", d, d))
-    near = np.flatnonzero(dist <= max_distance_m)
-    if len(near) == 0:
-        return []
-    facing = np.einsum("nfk,nfk->nf", faces.normals[near], cam_world - faces.mids[near]) > 0
-    box_i, face_i = np.nonzero(facing)
-    if len(box_i) == 0:
-        return []
-    outlines = faces.outlines[near[box_i], face_i]  # (m, P, 3)
-    cam_pts = camera.world_to_camera(outlines.reshape(-1, 3), pose).reshape(outlines.shape)
-    keep = np.all(cam_pts[:, :, 2] > 0.02, axis=1)
-    uv = camera.project(cam_pts.reshape(-1, 3)).reshape(len(outlines), -1, 2)
-    if windows is not None:
-        # A face drawn inside its outline's bounding box (±2 px for the fill's rounding)
-        # that misses every window cannot change a requested pixel.
-        lo = np.nan_to_num(uv.min(axis=1), nan=-1e9) - 2.0  # (m, 2)
-        hi = np.nan_to_num(uv.max(axis=1), nan=1e9) + 2.0
-        win = np.asarray(windows, dtype=np.float64)  # (k, 4)
-        touches = ((hi[:, None, 0] >= win[None, :, 0])
-                   & (lo[:, None, 0] < win[None, :, 0] + win[None, :, 2])
-                   & (hi[:, None, 1] >= win[None, :, 1])
-                   & (lo[:, None, 1] < win[None, :, 1] + win[None, :, 3]))
-        keep &= touches.any(axis=1)
-    shade = white_dn * (0.72 + 0.28 * np.maximum(0.0, faces.normals[near[box_i], face_i]
-                                                 @ _LIGHT_DIR))
-    order = np.argsort(-dist[near[box_i]], kind="stable")
-    return [(uv[k], float(shade[k])) for k in order if keep[k]]
+        return _NO_FACES
+    win = _NO_WINDOWS if windows is None else np.asarray(windows, dtype=np.float64)
+    uv, bbox, keep, dist = _project_faces(faces.outlines, faces.normals, faces.mids,
+                                          faces.centres, float(pose[0]), float(pose[1]),
+                                          float(pose[2]), camera.mount._rotation,
+                                          camera.mount._position, camera.K, camera.D,
+                                          float(max_distance_m), win)
+    if not keep.any():
+        return _NO_FACES
+    box_i, face_i = np.nonzero(keep)
+    order = np.argsort(-dist[box_i], kind="stable")
+    box_i, face_i = box_i[order], face_i[order]
+    return uv[box_i, face_i], bbox[box_i, face_i], faces.shading[box_i, face_i]
 
 
-def _draw_faces(faces: list[tuple[np.ndarray, float]], width: int, height: int
-                ) -> tuple[tuple[int, int], np.ndarray, np.ndarray] | None:
-    """Draw the obstacle faces once per frame into a buffer covering their bounding box in
-    image coordinates (the same whatever window is asked for, so windows equal crops).
-    Returns its top-left corner, the grey levels and the mask, or None if off-image."""
-    if not faces:
+def obstacle_faces(camera: FisheyeCamera, faces: BoxFaces, pose: tuple[float, float, float],
+                   white_dn: float = 255.0, max_distance_m: float = Hall().distance_m
+                   ) -> list[tuple[np.ndarray, float]]:
+    """``visible_faces`` as a list of image polygons [px] with their grey level [DN] for a
+    white carton of ``white_dn`` lit from above."""
+    uv, _, shading = visible_faces(camera, faces, pose, max_distance_m)
+    return [(outline, float(white_dn * shade)) for outline, shade in zip(uv, shading,
+                                                                          strict=True)]
+
+
+def _draw_faces(uv: np.ndarray, bbox: np.ndarray, shades: np.ndarray, width: int,
+                height: int) -> tuple[tuple[int, int], np.ndarray, np.ndarray] | None:
+    """Draw the faces (``visible_faces``' outlines and bounding boxes, grey levels [DN])
+    once per frame into a buffer covering their bounding box in image coordinates (the
+    same whatever window is asked for, so windows equal crops). Returns its top-left
+    corner, the index of the face seen at each pixel (0: none; later faces paint over
+    earlier ones) and the grey levels by index, or None if off-image."""
+    if not len(uv):
         return None
-    pts_all = np.concatenate([uv for uv, _ in faces])
-    x0 = max(0, int(np.floor(pts_all[:, 0].min())) - 1)
-    y0 = max(0, int(np.floor(pts_all[:, 1].min())) - 1)
-    x1 = min(width, int(np.ceil(pts_all[:, 0].max())) + 2)
-    y1 = min(height, int(np.ceil(pts_all[:, 1].max())) + 2)
+    (u_lo, v_lo), (u_hi, v_hi) = bbox[:, :2].min(axis=0), bbox[:, 2:].max(axis=0)
+    x0, y0 = max(0, math.floor(u_lo) - 1), max(0, math.floor(v_lo) - 1)
+    x1, y1 = min(width, math.ceil(u_hi) + 2), min(height, math.ceil(v_hi) + 2)
     if x1 <= x0 or y1 <= y0:
         return None
-    overlay = np.zeros((y1 - y0, x1 - x0), np.float32)
-    mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
+    ids = np.zeros((y1 - y0, x1 - x0), np.uint16)
     shift = 4  # sub-pixel vertices: 1/16 px
-    for uv, shade in faces:
-        pts = np.rint((uv - np.array([x0, y0])) * (1 << shift)).astype(np.int32)
-        cv2.fillPoly(overlay, [pts], float(shade), lineType=cv2.LINE_8, shift=shift)
-        cv2.fillPoly(mask, [pts], 1, lineType=cv2.LINE_8, shift=shift)
-    return (x0, y0), overlay, mask
+    pts = np.rint((uv - np.array([x0, y0])) * (1 << shift)).astype(np.int32)
+    for k in range(len(pts)):
+        cv2.fillPoly(ids, [pts[k]], k + 1, lineType=cv2.LINE_8, shift=shift)
+    return (x0, y0), ids, np.concatenate(([0.0], shades)).astype(np.float32)

@@ -82,7 +82,10 @@ def test_windows_equal_crops_of_the_full_frame(renderer: Renderer, variant: str)
     poses += [lane_pose(track, track.intersections[0].s1_m - 1.5), lane_pose(track, 2.0)]
     for k, pose in enumerate(poses):
         full = renderer.render(scene, pose, speed_m_s=3.0, frame_seed=k)
-        wins = [*ROIS, *random_windows(rng, 6), (0, 0, 752, 480)]
+        # The top rows switch between walls and ceiling (not sampled): windows across,
+        # inside and beside those switches.
+        top = [(100, 0, 600, 40), (360, 0, 30, 12), (0, 8, 90, 30), (370, 25, 3, 3)]
+        wins = [*ROIS, *random_windows(rng, 6), *top, (0, 0, 752, 480)]
         parts = renderer.render_windows(scene, pose, wins, speed_m_s=3.0, frame_seed=k)
         for (x, y, w, h), part in zip(wins, parts, strict=True):
             assert part.shape == (h, w) and part.dtype == np.uint8
@@ -111,6 +114,36 @@ def test_small_windows_at_an_obstacle_outline_equal_crops(renderer: Renderer) ->
                     assert np.array_equal(part, full[y:y + 4, x:x + 6]), (pose, x, y)
                     checked += 1
     assert checked > 200
+
+
+def test_obstacle_outlines_are_the_camera_projection_of_the_box_faces(
+        renderer: Renderer) -> None:
+    """The per-frame face kernel uses the camera model's formulas: its outlines equal
+    ``FisheyeCamera.project_world`` of the faces, here with a camera mounted off-centre
+    and yawed, and only faces turned towards the camera are drawn."""
+    camera = renderer.camera
+    mount = replace(camera.mount, lateral_m=0.03, yaw_rad=0.1, roll_rad=0.02)
+    camera = replace(camera, mount=mount)
+    track = generated(3)
+    faces = BoxFaces.of(build_scene(track, Effects.off()).boxes)
+    seen = 0
+    for ob in track.obstacles:
+        pose = lane_pose(track, ob.s_m - 0.8)
+        for uv, shade in obstacle_faces(camera, faces, pose):
+            # Find the face this outline belongs to by projecting every face (faces
+            # behind the lens project to NaN).
+            errors = np.nan_to_num([np.abs(camera.project_world(outline, pose) - uv).max()
+                                    for outline in faces.outlines.reshape(
+                                        -1, *faces.outlines.shape[2:])], nan=np.inf)
+            assert errors.min() < 1e-6
+            box, face = divmod(int(np.argmin(errors)), faces.outlines.shape[1])
+            cam_world = np.array([*pose[:2], 0.0]) + np.array([
+                [math.cos(pose[2]), -math.sin(pose[2]), 0.0],
+                [math.sin(pose[2]), math.cos(pose[2]), 0.0], [0.0, 0.0, 1.0]]) @ mount.position()
+            assert np.dot(faces.normals[box, face], cam_world - faces.mids[box, face]) > 0
+            assert 0.72 * 255 <= shade <= 255
+            seen += 1
+    assert seen >= 2
 
 
 def test_same_seed_same_frame_and_noise_differs_by_seed(renderer: Renderer) -> None:
