@@ -42,6 +42,9 @@ any radially symmetric lens the width at row v is ∝ (v − c_y), so width(425)
 would be 6.1 where table 2.3 allows 2.9–4.6); the thesis' camera had "a defined tilt"
 (2.1.1). 5.5° puts the horizon at row 213, 27 px above the image middle."""
 
+FRAME_RATE_HZ: float = 50.0
+"""Camera frame rate [1/s] (thesis 1.1; REFERENCE.md)."""
+
 DEFAULT_MOUNT_FORWARD_M: float = 0.20
 """Default camera position ahead of the rear axle [m] (roof of a 1:10 car)."""
 

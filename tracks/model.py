@@ -9,6 +9,7 @@ positive to the left of the driving direction. Cars drive on the right lane,
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 from enum import Enum
@@ -281,6 +282,25 @@ class Track:
     def heading(self, s: np.ndarray | float) -> np.ndarray:
         """Centre-line heading [rad] at arc length ``s`` [m]."""
         return self.pose(s)[2]
+
+    def heading_at(self, s_m: float) -> float:
+        """``heading`` for one arc length [m] (a float; no arrays: for per-step use)."""
+        if not math.isfinite(s_m):
+            raise ValueError("arc length s must be finite")
+        total = self.length_m
+        if self.closed:
+            s_m = s_m % total
+        elif not -1e-9 <= s_m <= total + 1e-9:
+            raise ValueError(f"s = {s_m:.6g} m is outside the open track [0, {total:.6g}] m; "
+                             "only closed tracks wrap around")
+        starts, h0, kappa = self._heading_table
+        k = min(max(bisect.bisect_right(starts, s_m) - 1, 0), len(starts) - 1)
+        return h0[k] + kappa[k] * (s_m - starts[k])
+
+    @cached_property
+    def _heading_table(self) -> tuple[list[float], list[float], list[float]]:
+        t = self.table
+        return t.s0.tolist(), t.h0.tolist(), t.kappa.tolist()
 
     def curvature(self, s: np.ndarray | float) -> np.ndarray:
         """Signed centre-line curvature [1/m] at arc length ``s`` [m] (left > 0)."""

@@ -13,8 +13,7 @@ import numpy as np
 from tracks import Track
 from tracks.fileformat import atomic_write
 
-FRAME_RATE_HZ: float = 50.0
-"""Camera frame rate [1/s] (thesis 1.1; REFERENCE.md)."""
+from ..camera import FRAME_RATE_HZ
 
 TRAJECTORY_FORMAT = "tfalda-sim/trajectory"
 """The ``format`` tag of a trajectory file."""

@@ -1,0 +1,98 @@
+"""The ``"lanes"`` observation: a ``LaneObservation`` as a normalised float32 vector.
+
+For ``n`` ROIs (``R`` rows, ``n = 2R``; the thesis: R = 2, n = 4, 42 entries) in the
+detector's order (row by row from the top, left ROI before right):
+
+| indices | entry | range |
+|---|---|---|
+| ``[0, 4n)`` | per ROI: lane ends ``x_top / W, y_top / H, x_bottom / W, y_bottom / H`` | [−1, 2] |
+| ``[4n, 5n)`` | per ROI: centre column of the ROI read this frame ``/ W`` | [0, 1] |
+| ``[5n, 6n)`` | per ROI: 1 if the LIS replaced the lane by last frame's | {0, 1} |
+| ``[6n, 7n)`` | per ROI: 1 if the vertical check corrected the lane | {0, 1} |
+| ``[7n, 7n + 2R)`` | per row: filtered lane width at its top, bottom edge ``/ W`` | [0, 2] |
+| ``7n + 2R`` | LIS fault counter ``/ (fault limit + 1)`` | [0, 1] |
+| ``+1`` | 1 if the LIS reset in this frame | {0, 1} |
+| ``+2`` | 1 if this was a first frame (start or after a reset) | {0, 1} |
+| ``+3 … +7`` | driving state one-hot (order ``STATES``) | {0, 1} |
+| ``+8`` | car speed ``/`` top speed (odometry) | [0, 1] |
+| ``+9`` | front-wheel angle ``/`` steering limit (servo feedback) | [−1, 1] |
+
+W = 752, H = 480 [px]. Values are clipped into the ranges (a lane end may lie a little
+outside its ROI); a missing lane reads −1, any other missing value 0.
+``lane_vector_names`` gives the name of every index.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from tfalda_sim.perception import LaneObservation, StateKind
+
+STATES: tuple[StateKind, ...] = (StateKind.STRAIGHT, StateKind.LEFT_CURVE,
+                                 StateKind.RIGHT_CURVE, StateKind.LANE_CHANGE_LEFT,
+                                 StateKind.LANE_CHANGE_RIGHT)
+"""Order of the driving-state one-hot."""
+
+
+def lane_vector_names(rows: int) -> list[str]:
+    """The name of each entry of the vector for ``rows`` ROI rows."""
+    rois = [f"r{r}_{side}" for r in range(rows) for side in ("left", "right")]
+    names = [f"{roi}_{end}" for roi in rois
+             for end in ("x_top", "y_top", "x_bottom", "y_bottom")]
+    names += [f"{roi}_roi_centre_x" for roi in rois]
+    names += [f"{roi}_replaced" for roi in rois]
+    names += [f"{roi}_corrected" for roi in rois]
+    names += [f"r{r}_width_{edge}" for r in range(rows) for edge in ("top", "bottom")]
+    names += ["fault_count", "reset", "first_frame"]
+    names += [f"state_{s.name.lower()}" for s in STATES]
+    names += ["speed", "steer"]
+    return names
+
+
+def lane_vector_bounds(rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(low, high)`` float32 bounds of the vector for ``rows`` ROI rows."""
+    low, high = _bounds(rows)
+    return low.copy(), high.copy()
+
+
+@functools.lru_cache(maxsize=8)
+def _bounds(rows: int) -> tuple[np.ndarray, np.ndarray]:
+    n = 2 * rows
+    size = len(lane_vector_names(rows))
+    low = np.zeros(size, np.float32)
+    high = np.ones(size, np.float32)
+    low[:4 * n] = -1.0
+    high[:4 * n] = 2.0
+    high[7 * n:7 * n + 2 * rows] = 2.0
+    low[-1] = -1.0
+    return low, high
+
+
+def lane_vector(obs: LaneObservation, *, image_width: int, image_height: int,
+                fault_limit: int, speed_ratio: float, steer_ratio: float,
+                out: np.ndarray | None = None) -> np.ndarray:
+    """Encode ``obs`` (and the car's odometry ratios) as the documented float32 vector."""
+    n = len(obs.lanes)
+    rows = obs.n_rows
+    low, high = _bounds(rows)
+    v = np.empty(len(low), np.float32) if out is None else out
+    scale = np.array([image_width, image_height, image_width, image_height], np.float64)
+    v[:4 * n] = (obs.lanes / scale).ravel()
+    v[:4 * n][np.isnan(v[:4 * n])] = -1.0  # a missing lane
+    v[4 * n:5 * n] = (obs.rois[:, 0] + 0.5 * obs.rois[:, 2]) / image_width
+    v[5 * n:6 * n] = obs.replaced
+    v[6 * n:7 * n] = obs.corrected
+    v[7 * n:7 * n + 2 * rows] = obs.widths.ravel() / image_width
+    k = 7 * n + 2 * rows
+    v[k] = obs.fault_count / (fault_limit + 1)
+    v[k + 1] = obs.reset
+    v[k + 2] = obs.first_frame
+    v[k + 3:k + 3 + len(STATES)] = 0.0
+    v[k + 3 + STATES.index(obs.state)] = 1.0
+    v[-2] = speed_ratio
+    v[-1] = steer_ratio
+    v[np.isnan(v)] = 0.0
+    np.clip(v, low, high, out=v)
+    return v

@@ -1,0 +1,181 @@
+"""Faults injected into a closed-loop drive, to stress the lane detection and its LIS.
+
+A fault schedule is a tuple of the frozen dataclasses below. Image faults act on the
+camera pixels after rendering, each as a function of the pixel and the step only, so
+the ROIs rendered on demand see exactly what the full frame shows. A marking gap is
+painted out of the scene (the ground truth and the reward still use the real track); a
+lateral kick moves the car; camera shake turns the camera, not the car.
+
+Steps count env steps (camera frames) after ``reset``: step 1 is the first ``step()``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, fields, replace
+
+import numpy as np
+
+from tracks import Gap, Line, Track
+
+
+def _check(fault: object) -> None:
+    """Every number finite, steps ≥ 1, durations ≥ 1."""
+    name = type(fault).__name__
+    for f in fields(fault):  # type: ignore[arg-type]
+        v = getattr(fault, f.name)
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            continue
+        if not math.isfinite(v):
+            raise ValueError(f"{name}.{f.name} must be finite, got {v!r}")
+        if f.name == "step" and v < 1:
+            raise ValueError(f"{name}.step must be ≥ 1 (the first step() is step 1), got {v}")
+        if f.name == "duration" and v < 1:
+            raise ValueError(f"{name}.duration must be ≥ 1 step, got {v}")
+
+
+@dataclass(frozen=True)
+class Blackout:
+    """The camera delivers black frames (lens covered, exposure failure)."""
+
+    step: int
+    duration: int = 1
+
+    def __post_init__(self) -> None:
+        _check(self)
+
+
+@dataclass(frozen=True)
+class Overexposure:
+    """The image is blown out: grey levels multiplied by ``gain`` [-] (saturating)."""
+
+    step: int
+    duration: int = 1
+    gain: float = 4.0
+
+    def __post_init__(self) -> None:
+        _check(self)
+        if self.gain < 0:
+            raise ValueError(f"Overexposure.gain must be ≥ 0, got {self.gain}")
+
+
+@dataclass(frozen=True)
+class Glare:
+    """A bright blob (sun or lamp reflection) centred at pixel ``(u_px, v_px)``: adds up
+    to ``peak_dn`` [DN], Gaussian with ``radius_px`` [px] standard deviation."""
+
+    step: int
+    duration: int = 1
+    u_px: float = 376.0
+    v_px: float = 330.0
+    radius_px: float = 60.0
+    peak_dn: float = 200.0
+
+    def __post_init__(self) -> None:
+        _check(self)
+        if self.radius_px <= 0 or self.peak_dn < 0:
+            raise ValueError("Glare.radius_px must be > 0 and Glare.peak_dn ≥ 0")
+
+
+@dataclass(frozen=True)
+class CameraShake:
+    """The camera turns by a random yaw of up to ``amplitude_rad`` [rad] each frame (a
+    loose mount on a bumpy floor); the car drives on unaffected."""
+
+    step: int
+    duration: int = 1
+    amplitude_rad: float = 0.03
+
+    def __post_init__(self) -> None:
+        _check(self)
+        if self.amplitude_rad < 0:
+            raise ValueError(f"CameraShake.amplitude_rad must be ≥ 0, got {self.amplitude_rad}")
+
+
+@dataclass(frozen=True)
+class LateralKick:
+    """At ``step`` the car is moved sideways by ``offset_m`` [m] (left positive), as if
+    pushed; speed and heading stay."""
+
+    step: int
+    offset_m: float = 0.15
+
+    def __post_init__(self) -> None:
+        _check(self)
+
+
+@dataclass(frozen=True)
+class MarkingGap:
+    """``lines`` are not painted from arc length ``s_m`` [m] for ``length_m`` [m] (for the
+    whole episode; the rules allow gaps of up to 1 m)."""
+
+    s_m: float
+    length_m: float = 1.0
+    lines: tuple[Line, ...] = (Line.LEFT, Line.CENTRE, Line.RIGHT)
+
+    def __post_init__(self) -> None:
+        _check(self)
+        if self.length_m <= 0:
+            raise ValueError(f"MarkingGap.length_m must be > 0, got {self.length_m}")
+        if not self.lines or not all(isinstance(v, Line) for v in self.lines):
+            raise ValueError(f"MarkingGap.lines must be tracks.Line members, got {self.lines}")
+
+
+Fault = Blackout | Overexposure | Glare | CameraShake | LateralKick | MarkingGap
+FAULT_TYPES: tuple[type, ...] = (Blackout, Overexposure, Glare, CameraShake, LateralKick,
+                                 MarkingGap)
+ImageFault = Blackout | Overexposure | Glare
+
+
+def check_schedule(faults: Sequence[object]) -> tuple[Fault, ...]:
+    """``faults`` as a tuple, each checked to be one of ``FAULT_TYPES``."""
+    if isinstance(faults, str | bytes) or not isinstance(faults, Sequence):
+        raise TypeError(f"the fault schedule must be a sequence of faults, got "
+                        f"{type(faults).__name__}")
+    for f in faults:
+        if not isinstance(f, FAULT_TYPES):
+            raise TypeError(f"unknown fault {f!r}; use one of "
+                            f"{', '.join(t.__name__ for t in FAULT_TYPES)} from tfalda_sim.faults")
+    return tuple(faults)  # type: ignore[arg-type]
+
+
+def active(faults: Sequence[Fault], step: int, kind: type) -> list:
+    """The faults of type ``kind`` acting at ``step``."""
+    out = []
+    for f in faults:
+        if isinstance(f, kind):
+            first = f.step
+            last = first + getattr(f, "duration", 1) - 1
+            if first <= step <= last:
+                out.append(f)
+    return out
+
+
+def with_gaps(track: Track, faults: Sequence[Fault]) -> Track:
+    """``track`` with the schedule's marking gaps painted out (the track to render; the
+    rasteriser wraps a gap over the start of a closed track)."""
+    gaps = tuple(Gap(line, f.s_m % track.length_m if track.closed else f.s_m, f.length_m)
+                 for f in faults if isinstance(f, MarkingGap) for line in f.lines)
+    return replace(track, gaps=track.gaps + gaps) if gaps else track
+
+
+def apply_image_faults(crops: list[np.ndarray], windows: Sequence[tuple[int, int, int, int]],
+                       faults: Sequence[ImageFault]) -> None:
+    """Apply the image faults, in schedule order, to the uint8 ``crops`` (in place), each
+    the window ``(x, y, w, h)`` [px] of the frame: a crop of a faulted full frame equals
+    the faulted crop."""
+    for f in faults:
+        for crop, (x0, y0, w, h) in zip(crops, windows, strict=True):
+            if isinstance(f, Blackout):
+                crop[:] = 0
+            elif isinstance(f, Overexposure):
+                crop[:] = np.clip(crop.astype(np.float32) * np.float32(f.gain)
+                                  + np.float32(0.5), 0, 255).astype(np.uint8)
+            elif isinstance(f, Glare):
+                u = np.arange(x0, x0 + w, dtype=np.float32) - np.float32(f.u_px)
+                v = np.arange(y0, y0 + h, dtype=np.float32) - np.float32(f.v_px)
+                k = np.float32(-0.5 / f.radius_px**2)
+                blob = (np.float32(f.peak_dn) * np.exp(k * v[:, None] ** 2)
+                        * np.exp(k * u[None, :] ** 2))
+                crop[:] = np.clip(crop + blob + np.float32(0.5), 0, 255).astype(np.uint8)
