@@ -9,7 +9,10 @@ OUT    ?= out
 $(BIN)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	# torch first, pinned to the local CPU wheel, so that stable-baselines3 (the rl extra)
+	# never makes pip fetch another torch with gigabytes of CUDA.
+	$(BIN)/python -m pip install --quiet torch==2.13.0
+	$(BIN)/python -m pip install --quiet -e '.[dev,rl]'
 	touch $@
 
 install: $(BIN)/.installed
@@ -27,6 +30,7 @@ bench: install
 	$(BIN)/python benchmarks/bench_tracks.py
 	$(BIN)/python benchmarks/bench_render.py
 	$(BIN)/python benchmarks/bench_perception.py
+	$(BIN)/python benchmarks/bench_env.py
 
 # The charts and figures of docs/evaluation.md (about 5 min on 2 cores).
 EV = docs/evaluation

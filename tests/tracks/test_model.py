@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.conftest import generated
-from tracks import Arc, Lane, Pose, Straight, Track
+from tracks import Arc, Lane, Pose, Straight, Track, load_named
 from tracks.geometry import project
 
 segment = st.one_of(
@@ -143,3 +143,11 @@ def test_locate_rejects_nan_and_bad_shapes() -> None:
         track.locate(math.nan, 0.0)
     with pytest.raises(ValueError, match=r"\(N, 2\)"):
         track.locate_many(np.zeros((3, 3)))
+
+
+def test_heading_at_equals_the_vectorised_heading(eight) -> None:
+    for track in (eight, load_named("oval"), load_named("straight")):
+        s = np.linspace(0.0, track.length_m, 501)
+        assert np.array_equal([track.heading_at(float(v)) for v in s], track.heading(s))
+    with pytest.raises(ValueError, match="outside"):
+        load_named("straight").heading_at(-1.0)

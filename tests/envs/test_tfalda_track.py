@@ -1,0 +1,277 @@
+"""TfaldaTrack-v0: API checks, determinism, bad input, faults, termination, rendering."""
+
+from __future__ import annotations
+
+import math
+import pickle
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import tfalda_sim
+from envs import TfaldaTrackEnv
+from tfalda_sim.faults import Blackout, LateralKick, MarkingGap
+from tracks import load_named
+
+MODES = ("lanes", "image", "dict")
+
+
+@pytest.fixture(scope="module")
+def oval_env() -> TfaldaTrackEnv:
+    return TfaldaTrackEnv(track="oval", render_mode="rgb_array")
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_gymnasium_check_env_passes_with_warnings_as_errors(mode: str) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        env = gym.make("TfaldaTrack-v0", observation=mode, render_mode="rgb_array")
+        check_env(env.unwrapped)
+        env.close()
+
+
+def test_registration_is_idempotent_and_has_a_module_path() -> None:
+    tfalda_sim.register_envs()
+    tfalda_sim.register_envs()
+    spec = gym.spec("TfaldaTrack-v0")
+    assert spec.max_episode_steps == tfalda_sim.MAX_EPISODE_STEPS
+    assert isinstance(spec.entry_point, str)
+    env = gym.make("tfalda_sim:TfaldaTrack-v0", track="oval")
+    assert isinstance(env.unwrapped, TfaldaTrackEnv)
+
+
+def rollout(env: gym.Env, seed: int, steps: int, options: dict | None = None) -> tuple:
+    obs, info = env.reset(seed=seed, options=options)
+    env.action_space.seed(seed)
+    observations, rewards, infos = [obs], [], [info]
+    for _ in range(steps):
+        obs, reward, terminated, truncated, info = env.step(env.action_space.sample() * 0.3)
+        observations.append(obs)
+        rewards.append(reward)
+        infos.append(info)
+        if terminated or truncated:
+            obs, info = env.reset()
+            observations.append(obs)
+            infos.append(info)
+    return observations, rewards, infos
+
+
+def equal_obs(x: np.ndarray | dict, y: np.ndarray | dict) -> bool:
+    if isinstance(x, dict):
+        return x.keys() == y.keys() and all(np.array_equal(x[k], y[k]) for k in x)
+    return np.array_equal(x, y)
+
+
+def same(a: tuple, b: tuple) -> bool:
+    obs_a, rew_a, info_a = a
+    obs_b, rew_b, info_b = b
+    return (len(obs_a) == len(obs_b) and rew_a == rew_b and info_a == info_b
+            and all(equal_obs(x, y) for x, y in zip(obs_a, obs_b, strict=True)))
+
+
+@pytest.mark.parametrize("randomize", [False, True])
+def test_same_seed_gives_bit_identical_1000_step_rollouts(randomize: bool) -> None:
+    kwargs = {"track": 5, "domain_randomization": randomize}
+    a = rollout(TfaldaTrackEnv(**kwargs), seed=11, steps=1000)
+    b = rollout(TfaldaTrackEnv(**kwargs), seed=11, steps=1000)
+    assert same(a, b)
+    c = rollout(TfaldaTrackEnv(**kwargs), seed=12, steps=50)
+    assert not same(a, c)
+
+
+def test_same_seed_image_rollouts_are_identical_and_generated_tracks_follow_the_seed() -> None:
+    a = rollout(TfaldaTrackEnv(observation="image"), seed=3, steps=40)
+    b = rollout(TfaldaTrackEnv(observation="image"), seed=3, steps=40)
+    assert same(a, b)
+    tracks = {TfaldaTrackEnv(track_seeds=(100, 110)).reset(seed=s)[1]["track"] for s in range(6)}
+    assert tracks <= set(range(100, 110)) and len(tracks) > 1
+
+
+@pytest.mark.parametrize("action, match", [
+    (np.array([np.nan], np.float32), "finite"),
+    (np.array([1.5], np.float32), r"\[-1, 1\]"),
+    (np.array([0.1, 0.2], np.float32), "shape"),
+    (np.zeros((1, 1), np.float32), "shape"),
+    (np.array(["a"]), "real numbers"),
+])
+def test_bad_actions_raise_naming_the_problem(oval_env: TfaldaTrackEnv, action, match: str) -> None:
+    oval_env.reset(seed=0)
+    with pytest.raises(ValueError, match=match):
+        oval_env.step(action)
+
+
+def test_bad_options_and_arguments_are_refused(oval_env: TfaldaTrackEnv) -> None:
+    with pytest.raises(ValueError, match=r"unknown reset option.*'spedd'"):
+        oval_env.reset(options={"spedd": 2.0})
+    with pytest.raises(ValueError, match="unknown track 'ovl'"):
+        oval_env.reset(options={"track": "ovl"})
+    with pytest.raises(ValueError, match="off the road"):
+        oval_env.reset(options={"start": (1.0, 0.9, 0.0)})
+    with pytest.raises(TypeError, match="unknown fault"):
+        oval_env.reset(options={"faults": ["blackout"]})
+    with pytest.raises(ValueError, match="unknown observation"):
+        TfaldaTrackEnv(observation="pixels")
+    with pytest.raises(ValueError, match="speed_m_s"):
+        TfaldaTrackEnv(speed_m_s=20.0)
+    with pytest.raises(ValueError, match="track_seeds"):
+        TfaldaTrackEnv(track_seeds=(5, 5))
+
+
+def test_reset_options_place_the_car(oval_env: TfaldaTrackEnv) -> None:
+    _, info = oval_env.reset(seed=0, options={"start": (4.0, -0.15, 0.05), "speed_m_s": 2.5})
+    assert info["s_m"] == pytest.approx(4.0, abs=1e-6)
+    assert info["cross_track_m"] == pytest.approx(0.05, abs=1e-6)
+    assert info["heading_error_rad"] == pytest.approx(0.05, abs=1e-9)
+    assert info["speed_m_s"] == 2.5
+    _, info = oval_env.reset(options={"track": load_named("thesis")})
+    assert info["track"] == "custom"
+
+
+def centre_steering(env: TfaldaTrackEnv) -> np.ndarray:
+    """A ground-truth controller for the tests (the agents steer from the lanes)."""
+    pos = env._world.position()
+    a = -3.0 * pos.cross_track_m - 1.2 * pos.heading_error_rad
+    kappa = float(env._world.track.curvature(pos.s_m))
+    a += math.atan(env.car.wheelbase_m * kappa) / env.car.max_steer_rad
+    return np.array([np.clip(a, -1, 1)], np.float32)
+
+
+def test_a_centred_drive_earns_about_one_per_step_and_counts_laps() -> None:
+    env = TfaldaTrackEnv(track="oval", max_laps=1)
+    env.reset(seed=0, options={"start": (0.0, -0.2, 0.0)})
+    rewards = []
+    for _ in range(3000):
+        _, reward, terminated, truncated, info = env.step(centre_steering(env))
+        rewards.append(reward)
+        assert not terminated
+        if truncated:
+            break
+    assert truncated and info["lap"] == 1
+    assert info["distance_m"] == pytest.approx(env._world.track.length_m, abs=0.05)
+    assert 0.9 < np.mean(rewards) <= 1.0
+    assert info["detector_hit_rate"] > 0.8 and info["lis_resets"] == 0
+
+
+def test_leaving_the_road_terminates_with_the_crash_penalty() -> None:
+    env = TfaldaTrackEnv(track="oval")
+    env.reset(seed=0, options={"start": (0.0, -0.2, 0.0)})
+    for _ in range(500):
+        _, reward, terminated, _, info = env.step(np.array([-1.0], np.float32))
+        if terminated:
+            break
+    assert terminated and info["off_road"] and reward < -5
+
+
+def test_hitting_a_carton_terminates() -> None:
+    env = TfaldaTrackEnv(track=3, obstacles=True)
+    env.reset(seed=0)
+    ob = env._world.track.obstacles[0]
+    lateral = -0.2 if ob.lane.value == "right" else 0.2
+    env.reset(options={"start": (ob.s_m - 1.2, lateral, 0.0)})
+    for _ in range(200):
+        _, reward, terminated, _, info = env.step(centre_steering(env))
+        if terminated:
+            break
+    assert terminated and info["collision"] and not info["off_road"] and reward < -5
+    assert env.reset(seed=0)[1]["collision"] is False  # random starts avoid the cartons
+
+
+def test_an_open_track_truncates_at_its_end() -> None:
+    env = TfaldaTrackEnv(track="straight", speed_m_s=4.0)
+    env.reset(seed=0)
+    for _ in range(2000):
+        _, _, terminated, truncated, _ = env.step(centre_steering(env))
+        if terminated or truncated:
+            break
+    assert truncated and not terminated
+
+
+def test_blackout_makes_the_lis_reset_and_recover() -> None:
+    env = TfaldaTrackEnv(track="oval", faults=[Blackout(step=20, duration=40)])
+    env.reset(seed=0, options={"start": (0.0, -0.2, 0.0)})
+    resets, hits = [], []
+    for _ in range(150):
+        _, _, terminated, _, info = env.step(centre_steering(env))
+        resets.append(info["lis_reset"])
+        hits.append(info["detector_hit_rate"])
+        assert not terminated
+    first = resets.index(True)
+    assert 20 <= first < 60  # during the blackout
+    assert np.mean(hits[100:]) > 0.8  # lanes found again after it
+
+
+def test_lateral_kick_moves_the_car_sideways() -> None:
+    env = TfaldaTrackEnv(track="oval", faults=[LateralKick(step=5, offset_m=0.12)])
+    env.reset(seed=0, options={"start": (0.0, -0.2, 0.0)})
+    errors = [env.step(np.zeros(1, np.float32))[4]["cross_track_m"] for _ in range(6)]
+    assert errors[4] - errors[3] == pytest.approx(0.12, abs=0.005)
+
+
+def test_marking_gap_is_rendered_but_not_scored_away(oval_env: TfaldaTrackEnv) -> None:
+    obs_clean, _ = oval_env.reset(seed=0, options={"start": (2.0, -0.2, 0.0)})
+    obs_gap, info = oval_env.reset(seed=0, options={
+        "start": (2.0, -0.2, 0.0), "faults": [MarkingGap(s_m=1.5, length_m=3.0)]})
+    assert not np.array_equal(obs_clean, obs_gap)
+    assert info["cross_track_m"] == pytest.approx(0.0, abs=1e-9)  # the real track
+
+
+def test_render_shows_the_frame_with_rois_and_the_inset(oval_env: TfaldaTrackEnv) -> None:
+    oval_env.reset(seed=0)
+    oval_env.step(np.zeros(1, np.float32))
+    img = oval_env.render()
+    assert img.shape == (480, 752, 3) and img.dtype == np.uint8
+    # ROI rectangles are drawn in colour; the grey camera frame has R = G = B.
+    assert np.any(img[..., 0] != img[..., 2])
+    quiet = TfaldaTrackEnv(track="oval")
+    quiet.reset(seed=0)
+    with pytest.warns(UserWarning, match="render_mode"):
+        assert quiet.render() is None
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_the_env_pickles_and_continues_identically(mode: str) -> None:
+    env = TfaldaTrackEnv(track=4, observation=mode, domain_randomization=True)
+    env.reset(seed=2)
+    for _ in range(10):
+        env.step(np.array([0.05], np.float32))
+    copy = pickle.loads(pickle.dumps(env))
+    assert len(pickle.dumps(env)) < 5_000_000  # caches are not pickled
+    for _ in range(10):
+        a = env.step(np.array([-0.1], np.float32))
+        b = copy.step(np.array([-0.1], np.float32))
+        assert same(([a[0]], [a[1]], [a[4]]), ([b[0]], [b[1]], [b[4]]))
+
+
+@pytest.mark.parametrize("vector", ["sync", "async"])
+def test_vector_envs(vector: str) -> None:
+    make = gym.vector.SyncVectorEnv if vector == "sync" else gym.vector.AsyncVectorEnv
+    fns = [lambda: gym.make("TfaldaTrack-v0", track="oval")] * 2
+    envs = make(fns)
+    try:
+        obs, info = envs.reset(seed=[1, 2])
+        assert obs.shape == (2, 42) and obs.dtype == np.float32
+        for _ in range(5):
+            obs, reward, _terminated, _truncated, info = envs.step(
+                np.zeros((2, 1), np.float32))
+        assert reward.shape == (2,) and info["cross_track_m"].shape == (2,)
+    finally:
+        envs.close()
+
+
+def test_record_video_wrapper_writes_an_mp4(tmp_path) -> None:
+    pytest.importorskip("moviepy")
+    env = gym.make("TfaldaTrack-v0", track="oval", render_mode="rgb_array",
+                   max_episode_steps=20)
+    env = gym.wrappers.RecordVideo(env, str(tmp_path / "videos"), episode_trigger=lambda e: True,
+                                   disable_logger=True)
+    env.reset(seed=0)
+    done = False
+    while not done:
+        _, _, terminated, truncated, _ = env.step(np.zeros(1, np.float32))
+        done = terminated or truncated
+    env.close()
+    videos = list((tmp_path / "videos").glob("*.mp4"))
+    assert len(videos) == 1 and videos[0].stat().st_size > 1000

@@ -1,0 +1,95 @@
+"""Fault schedules: image faults equal on crops and full frames, gaps, bad schedules."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tfalda_sim.faults import (
+    Blackout,
+    CameraShake,
+    Glare,
+    LateralKick,
+    MarkingGap,
+    Overexposure,
+    active,
+    apply_image_faults,
+    check_schedule,
+    with_gaps,
+)
+from tfalda_sim.rendering import Effects, Renderer, build_scene
+from tracks import Line, load_named
+
+WINDOWS = [(195, 260, 150, 75), (365, 260, 150, 75), (80, 340, 180, 85), (429, 340, 180, 85)]
+
+
+@pytest.mark.parametrize("fault", [Blackout(1), Overexposure(1, gain=3.0),
+                                   Glare(1, u_px=300.0, v_px=300.0, radius_px=50.0)])
+def test_image_faults_on_crops_equal_the_faulted_full_frame(fault) -> None:
+    rng = np.random.default_rng(0)
+    frame = rng.integers(0, 256, (480, 752), dtype=np.uint8)
+    crops = [frame[y:y + h, x:x + w].copy() for x, y, w, h in WINDOWS]
+    full = frame.copy()
+    apply_image_faults([full], [(0, 0, 752, 480)], [fault])
+    apply_image_faults(crops, WINDOWS, [fault])
+    for crop, (x, y, w, h) in zip(crops, WINDOWS, strict=True):
+        assert np.array_equal(crop, full[y:y + h, x:x + w])
+    assert not np.array_equal(full, frame)
+
+
+def test_image_fault_values() -> None:
+    frame = np.full((480, 752), 100, np.uint8)
+    black = frame.copy()
+    apply_image_faults([black], [(0, 0, 752, 480)], [Blackout(1)])
+    assert black.max() == 0
+    bright = frame.copy()
+    apply_image_faults([bright], [(0, 0, 752, 480)], [Overexposure(1, gain=2.0)])
+    assert np.all(bright == 200)
+    glare = frame.copy()
+    apply_image_faults([glare], [(0, 0, 752, 480)], [Glare(1, u_px=100, v_px=200,
+                                                           radius_px=20, peak_dn=80)])
+    assert glare[200, 100] == 180 and glare[200, 200] == 100 and glare[0, 0] == 100
+
+
+def test_active_faults_by_step() -> None:
+    schedule = check_schedule([Blackout(5, duration=3), LateralKick(6), Glare(2)])
+    assert [active(schedule, k, Blackout) != [] for k in range(3, 10)] == [
+        False, False, True, True, True, False, False]
+    assert active(schedule, 6, LateralKick) == [LateralKick(6)]
+    assert active(schedule, 2, Glare) == [Glare(2)] and active(schedule, 3, Glare) == []
+
+
+def test_a_marking_gap_paints_the_lines_out() -> None:
+    track = load_named("oval")
+    gap = MarkingGap(s_m=1.6, length_m=2.0)  # under and ahead of the car
+    renderer = Renderer()
+    x, y, h = (float(v) for v in track.pose(1.6, -0.5 * track.lane_width_m))
+    clean = renderer.render(build_scene(track, Effects.off()), (x, y, h))
+    gapped = renderer.render(build_scene(with_gaps(track, [gap]), Effects.off()), (x, y, h))
+    # The lines right ahead are gone: only the mat's grey is left in the lower ROIs.
+    for x0, y0, w, hh in WINDOWS[2:]:
+        assert clean[y0:y0 + hh, x0:x0 + w].max() > 150
+        assert gapped[y0:y0 + hh, x0:x0 + w].max() <= Effects.off().mat_dn + 1
+    wrapped = with_gaps(track, [MarkingGap(s_m=track.length_m + 1.0, lines=(Line.RIGHT,))])
+    assert wrapped.gaps[-1].s_m == pytest.approx(1.0) and wrapped.gaps[-1].line is Line.RIGHT
+
+
+@pytest.mark.parametrize("make, match", [
+    (lambda: Blackout(0), "step"), (lambda: Glare(1, duration=0), "duration"),
+    (lambda: LateralKick(3, offset_m=math.nan), "offset_m"),
+    (lambda: MarkingGap(1.0, length_m=-1.0), "length_m"),
+    (lambda: MarkingGap(1.0, lines=("left",)), "Line"),
+    (lambda: CameraShake(2, amplitude_rad=-0.1), "amplitude"),
+])
+def test_bad_faults_are_refused(make, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        make()
+
+
+def test_unknown_faults_in_a_schedule_are_refused() -> None:
+    with pytest.raises(TypeError, match="unknown fault"):
+        check_schedule([Blackout(1), "glare"])
+    with pytest.raises(TypeError, match="sequence"):
+        check_schedule("blackout")

@@ -1,0 +1,125 @@
+"""The pymunk world: bicycle kinematics, collisions with cartons, position on the track."""
+
+from __future__ import annotations
+
+import math
+import pickle
+
+import numpy as np
+import pytest
+
+from tests.conftest import generated
+from tfalda_sim.world import PHYSICS_STEPS_PER_FRAME, World
+from tracks import load_named
+
+
+def lane_start(track, s: float, lateral: float | None = None) -> tuple[float, float, float]:
+    x, y, h = track.pose(s, -0.5 * track.lane_width_m if lateral is None else lateral)
+    return float(x), float(y), float(h)
+
+
+def test_constant_steering_drives_a_circle_of_the_bicycle_radius() -> None:
+    world = World(load_named("oval"))
+    steer = 0.3
+    world.reset((0.0, 0.0, 0.0), speed_m_s=2.0, steer_rad=steer)
+    points = []
+    for _ in range(200):
+        world.step(steer)
+        points.append(world.pose[:2])
+    p = np.array(points)
+    radius = world.car.wheelbase_m / math.tan(steer)
+    centre = np.array([0.0, radius])  # to the left of the start
+    assert np.allclose(np.hypot(*(p - centre).T), radius, atol=2e-4)
+    # Arc length driven = speed × time.
+    heading = world.pose[2]
+    assert heading == pytest.approx(2.0 * 200 / 50 / radius, rel=1e-6)
+
+
+def test_straight_drive_covers_speed_times_time() -> None:
+    world = World(load_named("straight"))
+    world.reset((0.0, 0.0, 0.3), speed_m_s=1.5)
+    for _ in range(50):
+        world.step(0.0)
+    x, y, yaw = world.pose
+    assert (x, y) == pytest.approx((1.5 * math.cos(0.3), 1.5 * math.sin(0.3)), abs=1e-9)
+    assert yaw == 0.3 and world.time_s == pytest.approx(1.0)
+
+
+def test_throttle_accelerates_within_the_limit() -> None:
+    world = World(load_named("straight"))
+    world.reset((0.0, 0.0, 0.0), speed_m_s=1.0)
+    world.step(0.0, throttle=1.0)
+    assert world.speed_m_s == pytest.approx(1.0 + world.car.max_accel_m_s2 / 50)
+
+
+def test_driving_into_a_carton_is_a_collision_and_the_free_lane_is_not() -> None:
+    track = generated(3)
+    ob = track.obstacles[0]
+    sign = -1.0 if ob.lane.value == "right" else 1.0
+    world = World(track)
+    # Follow the lane exactly by placing the car on it: the carton's lane collides...
+    hits = []
+    for lateral in (sign * 0.5 * track.lane_width_m, -sign * 0.5 * track.lane_width_m):
+        world.reset(lane_start(track, ob.s_m - 1.0, lateral), speed_m_s=0.0)
+        hit = False
+        for s in np.arange(ob.s_m - 1.0, ob.s_m + 1.0, 0.02):
+            world.place(lane_start(track, s, lateral))
+            world.step(0.0)
+            hit = hit or world.collided
+        hits.append(hit)
+    assert hits == [True, False]
+
+
+def test_a_fast_car_does_not_tunnel_through_a_carton() -> None:
+    track = generated(3)
+    ob = track.obstacles[0]
+    lateral = (-1.0 if ob.lane.value == "right" else 1.0) * 0.5 * track.lane_width_m
+    x, y, _h = lane_start(track, ob.s_m - 0.5, lateral)
+    tx, ty, _ = lane_start(track, ob.s_m, lateral)
+    world = World(track)
+    world.reset((x, y, math.atan2(ty - y, tx - x)), speed_m_s=world.car.max_speed_m_s)
+    assert any(world.step(0.0) for _ in range(10))
+    # The car's body is tested after every physics step, each shorter than a carton.
+    assert world.car.max_speed_m_s / (50 * PHYSICS_STEPS_PER_FRAME) < min(ob.width_m,
+                                                                           ob.length_m)
+
+
+def test_position_on_the_track() -> None:
+    track = load_named("oval")
+    world = World(track)
+    world.reset(lane_start(track, 3.0, -0.25), speed_m_s=1.0)
+    x, y, yaw = world.pose
+    world.place((x, y, yaw + 0.1))
+    pos = world.position()
+    assert pos.s_m == pytest.approx(3.0, abs=1e-6)
+    assert pos.cross_track_m == pytest.approx(-0.05, abs=1e-6)
+    assert pos.heading_error_rad == pytest.approx(0.1, abs=1e-9)
+    assert not pos.off_road
+    world.place(lane_start(track, 3.0, -track.half_road_m - 0.01))
+    assert world.position().off_road
+
+
+def test_bad_inputs_are_refused() -> None:
+    world = World(load_named("oval"))
+    with pytest.raises(ValueError, match="pose"):
+        world.reset((math.nan, 0.0, 0.0))
+    with pytest.raises(ValueError, match="speed_m_s"):
+        world.reset((0.0, 0.0, 0.0), speed_m_s=100.0)
+    world.reset((0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="throttle"):
+        world.step(0.0, throttle=1.5)
+    with pytest.raises(ValueError, match="steer"):
+        world.step(math.inf)
+
+
+def test_the_world_pickles_and_continues_identically() -> None:
+    track = generated(3)
+    world = World(track)
+    world.reset(lane_start(track, 1.0), speed_m_s=2.0)
+    for _ in range(5):
+        world.step(0.1)
+    copy = pickle.loads(pickle.dumps(world))
+    for _ in range(20):
+        world.step(-0.2)
+        copy.step(-0.2)
+    assert world.pose == copy.pose and world.speed_m_s == copy.speed_m_s
