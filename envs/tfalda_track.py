@@ -502,8 +502,9 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         if self._map is None:
             self._map = TopDownMap.of(self._world.track, 180, self.car)
         inset = self._map.draw(self._world.pose)
+        # Top right, over the walls: the ROIs and lanes stay visible.
         h, w = inset.shape[:2]
-        out[-h - 8:-8, -w - 8:-8] = inset
-        cv2.rectangle(out, (out.shape[1] - w - 9, out.shape[0] - h - 9),
-                      (out.shape[1] - 8, out.shape[0] - 8), (255, 255, 255), 1)
+        x0 = out.shape[1] - w - 8
+        out[8:8 + h, x0:x0 + w] = inset
+        cv2.rectangle(out, (x0 - 1, 7), (x0 + w, 8 + h), (255, 255, 255), 1)
         return cv2.cvtColor(out, cv2.COLOR_BGR2RGB)
