@@ -199,6 +199,15 @@ class FisheyeCamera:
         """World points [m] → pixels, for a car at ``car_pose``; NaN behind the lens."""
         return self.project(self.world_to_camera(points_world, car_pose))
 
+    def pixels_to_ground(self, pixels: np.ndarray) -> np.ndarray:
+        """``(N, 2)`` pixels → the ``(N, 2)`` points (x forward, y left) [m] of the flat
+        ground they see, in the car frame; NaN where the ray does not reach the ground."""
+        rays = self.unproject(pixels) @ self.mount._rotation
+        pos = self.mount._position
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(rays[:, 2] < -1e-9, -pos[2] / rays[:, 2], np.nan)
+        return np.column_stack([pos[0] + t * rays[:, 0], pos[1] + t * rays[:, 1]])
+
     def pixel_rays_car(self) -> np.ndarray:
         """Unit ray of every pixel centre in the car frame, ``(height, width, 3)``."""
         v, u = np.mgrid[0:self.height, 0:self.width].astype(np.float64)

@@ -20,6 +20,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from agents.command import add_drive_parser
 from tfalda_sim.cli_common import CliError, check_outputs, finite_float_arg, seed_arg
 from tracks.fileformat import TrackFileError, load_track, save_track
 from tracks.generator import GeneratorParams, generate
@@ -257,6 +258,7 @@ def build_parser() -> argparse.ArgumentParser:
     ren.set_defaults(func=_cmd_render)
 
     add_evaluate_parser(sub)
+    add_drive_parser(sub)
     return parser
 
 

@@ -1,0 +1,164 @@
+"""Closed-loop drives: an agent steers TfaldaTrack-v0 for a number of laps.
+
+``drive`` runs one car on one track from the start line and reports lap times, the
+lateral error, departures from the road and LIS resets; with ``recover`` a car that left
+the road is put back on its lane where it left and the drive goes on (the departure is
+counted), otherwise the drive ends there. ``make_agent`` builds the PID or loads a PPO
+policy (the ``rl`` extra).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+from tqdm import tqdm
+
+from envs import TfaldaTrackEnv
+from tfalda_sim.camera import FRAME_RATE_HZ
+from tfalda_sim.video import VideoWriter
+from tracks import Track
+
+from .pid import LanePid
+
+
+class Agent(Protocol):
+    """What ``drive`` steers with: ``reset()`` at the start, ``act(obs)`` every frame."""
+
+    def reset(self) -> None: ...
+
+    def act(self, obs: np.ndarray) -> np.ndarray: ...
+
+
+class PpoAgent:
+    """A trained stable-baselines3 PPO policy (deterministic actions)."""
+
+    def __init__(self, path: str | Path) -> None:
+        try:
+            from stable_baselines3 import PPO
+        except ImportError as exc:
+            raise ImportError("the PPO agent needs the rl extra: pip install torch==2.13.0 "
+                              "&& pip install -e '.[rl]'") from exc
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"no policy file {path}; train one with "
+                                    "`tfalda-sim train` or use agents/policies/ppo.zip")
+        self.model = PPO.load(path, device="cpu")
+
+    def reset(self) -> None:
+        pass
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        action, _ = self.model.predict(obs, deterministic=True)
+        return np.clip(np.asarray(action, np.float32), -1.0, 1.0)
+
+
+DEFAULT_POLICY = Path(__file__).resolve().parent / "policies" / "ppo.zip"
+"""The committed PPO policy (see docs/agents.md for the command that trained it)."""
+
+
+def make_agent(kind: str, policy: str | Path | None = None) -> Agent:
+    """``"pid"`` or ``"ppo"`` (from ``policy``, default ``DEFAULT_POLICY``)."""
+    if kind == "pid":
+        if policy is not None:
+            raise ValueError("--policy is for the ppo agent only")
+        return LanePid()
+    if kind == "ppo":
+        return PpoAgent(policy or DEFAULT_POLICY)
+    raise ValueError(f"unknown agent {kind!r}; use pid or ppo")
+
+
+@dataclass
+class DriveResult:
+    """The figures of one drive (units in the names)."""
+
+    track: str
+    laps_completed: int
+    lap_times_s: list[float]
+    departures: int
+    lis_resets: int
+    mean_abs_cross_track_m: float
+    max_abs_cross_track_m: float
+    mean_hit_rate: float
+    distance_m: float
+    steps: int
+    wall_time_s: float
+    ended: str  # "laps", "departure", "steps"
+    cross_track_m: list[float] = field(default_factory=list, repr=False)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready figures (without the per-step trace)."""
+        out = asdict(self)
+        out.pop("cross_track_m")
+        out["lap_times_s"] = [round(t, 3) for t in self.lap_times_s]
+        out["steps_per_s"] = self.steps / self.wall_time_s if self.wall_time_s > 0 else None
+        return out
+
+
+def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
+          recover: bool = True, video: Path | None = None, max_steps: int | None = None,
+          label: str = "", progress: bool = False, env: TfaldaTrackEnv | None = None
+          ) -> DriveResult:
+    """Drive ``laps`` laps of ``track`` from its start line at ``speed_m_s``."""
+    if laps < 1:
+        raise ValueError(f"laps must be ≥ 1, got {laps}")
+    if not track.closed:
+        raise ValueError(f"{track.name or 'the track'} is not a loop: laps need a closed track")
+    env = env or TfaldaTrackEnv(track=track, speed_m_s=speed_m_s,
+                                render_mode="rgb_array" if video else None)
+    lane = -0.5 * track.lane_width_m
+    start_s = track.start_line_s_m or 0.0
+    steps_budget = max_steps or int(3 * laps * track.length_m / speed_m_s * FRAME_RATE_HZ)
+    obs, info = env.reset(seed=0, options={"track": track, "start": (start_s, lane, 0.0),
+                                           "speed_m_s": speed_m_s})
+    agent.reset()
+    total = track.length_m
+    distance, lap_times, errors, hits = 0.0, [], [], []
+    departures = resets = steps = 0
+    ended = "steps"
+    t0 = time.perf_counter()
+    writer = VideoWriter(video, FRAME_RATE_HZ) if video else None
+    bar = tqdm(total=laps, desc=label or "laps", disable=not progress, unit="lap")
+    try:
+        while steps < steps_budget:
+            obs, _, terminated, _, info = env.step(agent.act(obs))
+            steps += 1
+            if writer is not None:
+                writer.write(env.render()[..., ::-1])
+            errors.append(info["cross_track_m"])
+            hits.append(info["detector_hit_rate"])
+            resets += info["lis_reset"]
+            # Distance over all episodes of the drive (a recovery starts a new episode).
+            lap_now = math.floor((distance + info["distance_m"]) / total)
+            while len(lap_times) < lap_now:
+                lap_times.append(steps / FRAME_RATE_HZ - math.fsum(lap_times))
+                bar.update(1)
+            if len(lap_times) >= laps:
+                ended = "laps"
+                break
+            if terminated:
+                departures += 1
+                if not recover:
+                    ended = "departure"
+                    break
+                distance += info["distance_m"]
+                obs, _ = env.reset(options={"track": track, "speed_m_s": speed_m_s,
+                                            "start": (info["s_m"], lane, 0.0)})
+                agent.reset()
+    finally:
+        bar.close()
+        if writer is not None:
+            writer.close(keep=True)
+    errs = np.abs(np.array(errors)) if errors else np.zeros(1)
+    return DriveResult(
+        track=label or track.name or "", laps_completed=len(lap_times), lap_times_s=lap_times,
+        departures=departures, lis_resets=resets,
+        mean_abs_cross_track_m=float(errs.mean()), max_abs_cross_track_m=float(errs.max()),
+        mean_hit_rate=float(np.mean(hits)) if hits else math.nan,
+        distance_m=distance + info["distance_m"], steps=steps,
+        wall_time_s=time.perf_counter() - t0, ended=ended,
+        cross_track_m=[float(e) for e in errors])
