@@ -7,7 +7,13 @@ import json
 from pathlib import Path
 from typing import Any
 
-from tfalda_sim.cli_common import CliError, check_outputs, positive_float_arg, positive_int_arg
+from tfalda_sim.cli_common import (
+    CliError,
+    check_outputs,
+    positive_float_arg,
+    positive_int_arg,
+    seed_range_arg,
+)
 from tracks import NAMED_TRACKS, generate, load_named
 
 
@@ -69,3 +75,71 @@ def _cmd_drive(args: argparse.Namespace) -> int:
         if args.video:
             print(f"  wrote {args.video}")
     return 0 if result.laps_completed == args.laps else 1
+
+
+def add_train_parser(sub: Any) -> None:
+    tr = sub.add_parser("train", help="train a PPO steering policy (needs the rl extra)",
+                        description="PPO (stable-baselines3) on vectorised TfaldaTrack-v0 envs "
+                                    "over the training track seeds; TensorBoard logs, "
+                                    "checkpoints, the policy and train.json in --out.")
+    tr.add_argument("--timesteps", type=positive_int_arg, default=1_000_000)
+    tr.add_argument("--n-envs", type=positive_int_arg, default=2)
+    tr.add_argument("--seed", type=int, default=0)
+    tr.add_argument("--speed", type=positive_float_arg, default=1.5, help="[m/s]")
+    tr.add_argument("--out", type=Path, default=Path("runs/ppo"))
+    tr.add_argument("--json", action="store_true", help="print one JSON object")
+    tr.set_defaults(func=_cmd_train)
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    try:
+        import stable_baselines3  # noqa: F401
+    except ImportError:
+        raise CliError("training needs the rl extra: pip install torch==2.13.0 && "
+                       "pip install -e '.[rl]'") from None
+    from .train import train
+
+    if (args.out / "policy.zip").exists():
+        raise CliError(f"{args.out / 'policy.zip'} exists; choose another --out")
+    summary = train(args.timesteps, args.n_envs, args.seed, args.out, speed_m_s=args.speed,
+                    progress=not args.json)
+    print(json.dumps(summary) if args.json else
+          f"trained {args.timesteps} steps in {summary['train_time_s']:.0f} s → "
+          f"{args.out / 'policy.zip'}")
+    return 0
+
+
+def add_stress_parser(sub: Any) -> None:
+    from .stress import FAULTS
+
+    st = sub.add_parser("stress", help="stress-test the LIS reset logic with injected faults",
+                        description="Closed-loop PID drives with a battery of faults, each with "
+                                    "and without the LIS reset stage: resets, frames until the "
+                                    "lanes are valid again, false resets, departures.")
+    st.add_argument("--seeds", type=seed_range_arg, default=range(10_000, 10_010),
+                    help="generated tracks A:B")
+    st.add_argument("--faults", default=",".join(FAULTS),
+                    help=f"comma-separated subset of: {', '.join(FAULTS)}")
+    st.add_argument("--workers", type=positive_int_arg, help="processes (default: all CPUs)")
+    st.add_argument("--out", type=Path, default=Path("out/stress"),
+                    help="directory for stress.json, stress.md and stress.png")
+    st.add_argument("--json", action="store_true", help="print the summary as JSON")
+    st.set_defaults(func=_cmd_stress)
+
+
+def _cmd_stress(args: argparse.Namespace) -> int:
+    from .stress import FAULTS, markdown_table, report, run_battery
+
+    faults = [f.strip() for f in args.faults.split(",") if f.strip()]
+    unknown = [f for f in faults if f not in FAULTS]
+    if unknown or not faults:
+        raise CliError(f"unknown fault(s) {', '.join(unknown) or '(none given)'}; "
+                       f"known: {', '.join(FAULTS)}")
+    runs = run_battery(args.seeds, faults, workers=args.workers, progress=not args.json)
+    result = report(runs, args.out)
+    if args.json:
+        print(json.dumps({"summary": result["summary"], "out": str(args.out)}))
+    else:
+        print(markdown_table(result["summary"]))
+        print(f"wrote {args.out}/stress.json, stress.md, stress.png")
+    return 0

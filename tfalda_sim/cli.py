@@ -20,7 +20,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from agents.command import add_drive_parser
+from agents.command import add_drive_parser, add_stress_parser, add_train_parser
 from tfalda_sim.cli_common import CliError, check_outputs, finite_float_arg, seed_arg
 from tracks.fileformat import TrackFileError, load_track, save_track
 from tracks.generator import GeneratorParams, generate
@@ -259,6 +259,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_evaluate_parser(sub)
     add_drive_parser(sub)
+    add_train_parser(sub)
+    add_stress_parser(sub)
     return parser
 
 
