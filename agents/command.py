@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +29,8 @@ def add_drive_parser(sub: Any) -> None:
                     help=f"a named track ({', '.join(NAMED_TRACKS)}) or a generator seed")
     dr.add_argument("--laps", type=positive_int_arg, default=2)
     dr.add_argument("--speed", type=positive_float_arg, default=1.5, help="[m/s]")
+    dr.add_argument("--obstacles", action="store_true",
+                    help="keep a generated track's cartons (the agents do not avoid them)")
     dr.add_argument("--no-recover", action="store_true",
                     help="end the drive at the first departure (default: put the car back)")
     dr.add_argument("--video", type=Path, help="MP4 of the drive with ROIs, lanes and a map")
@@ -44,6 +47,8 @@ def _cmd_drive(args: argparse.Namespace) -> int:
         track, label = load_named(args.track), args.track
     elif args.track.isdigit():
         track, label = generate(int(args.track)), f"seed {args.track}"
+        if not args.obstacles:
+            track = replace(track, obstacles=())
     else:
         raise CliError(f"--track {args.track!r} is neither a named track "
                        f"({', '.join(NAMED_TRACKS)}) nor a seed (a non-negative integer)")

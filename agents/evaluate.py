@@ -2,7 +2,8 @@
 
     python -m agents.evaluate --agent pid --seeds 10000:10100 --laps 3 [--speeds 1.5,2,2.5] --json
 
-Each track is driven from its start line; a run succeeds when the car completes the laps
+Each track (its cartons removed: lane keeping does not avoid obstacles) is driven from
+its start line; a run succeeds when the car completes the laps
 without a departure (the drive ends at the first one). Seeds run in a process pool
 (results do not depend on the worker count) with a progress bar. ``--speeds`` runs the
 same tracks at several speeds (the speed sweep of docs/agents.md).
@@ -14,6 +15,7 @@ import argparse
 import json
 import sys
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +31,8 @@ from .train import TEST_SEEDS
 
 def _one(job: tuple[str, str | None, int, int, float]) -> dict[str, Any]:
     kind, policy, seed, laps, speed = job
-    result = drive(make_agent(kind, policy), generate(seed), laps=laps, speed_m_s=speed,
+    track = replace(generate(seed), obstacles=())  # lane keeping: no cartons to avoid
+    result = drive(make_agent(kind, policy), track, laps=laps, speed_m_s=speed,
                    recover=False, label=f"seed {seed}")
     return {"seed": seed, "speed_m_s": speed, "success": result.laps_completed == laps,
             **{k: v for k, v in result.summary().items() if k != "track"}}

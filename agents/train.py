@@ -45,16 +45,18 @@ class PpoConfig:
     net_arch: tuple[int, ...] = (64, 64)
 
 
-def env_kwargs(speed_m_s: float = TRAIN_SPEED_M_S, seeds: tuple[int, int] = TRAIN_SEEDS
-               ) -> dict[str, Any]:
-    """Arguments of the training env: a new generated track each reset from ``seeds``."""
-    return {"track": None, "track_seeds": seeds, "speed_m_s": speed_m_s}
+def env_kwargs(speed_m_s: float = TRAIN_SPEED_M_S, seeds: tuple[int, int] = TRAIN_SEEDS,
+               track: str | int | None = None) -> dict[str, Any]:
+    """Arguments of the training env: a new generated track each reset from ``seeds``
+    (or always ``track``)."""
+    return {"track": track, "track_seeds": seeds, "speed_m_s": speed_m_s}
 
 
 def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfig | None = None,
           speed_m_s: float = TRAIN_SPEED_M_S, progress: bool = True,
-          subprocess: bool = True) -> dict[str, Any]:
-    """Train PPO and save it under ``out``; returns the summary written to train.json."""
+          subprocess: bool = True, track: str | int | None = None) -> dict[str, Any]:
+    """Train PPO and save it under ``out``; returns the summary written to train.json.
+    ``track`` fixes the track (default: the generated ``TRAIN_SEEDS``)."""
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import CheckpointCallback
     from stable_baselines3.common.env_util import make_vec_env
@@ -66,7 +68,7 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
     out.mkdir(parents=True, exist_ok=True)
     vec_cls = SubprocVecEnv if subprocess and n_envs > 1 else DummyVecEnv
     venv = make_vec_env(TfaldaTrackEnv, n_envs=n_envs, seed=seed, vec_env_cls=vec_cls,
-                        env_kwargs=env_kwargs(speed_m_s))
+                        env_kwargs=env_kwargs(speed_m_s, track=track))
     try:
         model = PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size,
                     n_epochs=cfg.n_epochs, learning_rate=cfg.learning_rate, gamma=cfg.gamma,
@@ -82,7 +84,7 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
     finally:
         venv.close()
     summary = {"timesteps": timesteps, "n_envs": n_envs, "seed": seed, "speed_m_s": speed_m_s,
-               "train_seeds": list(TRAIN_SEEDS), "config": cfg.__dict__ | {
+               "track": track, "train_seeds": list(TRAIN_SEEDS), "config": cfg.__dict__ | {
                    "net_arch": list(cfg.net_arch)},
                "train_time_s": elapsed, "cores": os.cpu_count(),
                "python": platform.python_version(),

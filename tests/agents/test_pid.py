@@ -1,0 +1,56 @@
+"""The PID lane keeper: lane geometry from the lanes alone, and laps of a named track."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agents.drive import drive, make_agent
+from agents.pid import LanePid
+from envs import TfaldaTrackEnv
+from tracks import load_named
+
+
+def test_lane_geometry_from_the_lanes_matches_the_truth() -> None:
+    env = TfaldaTrackEnv(track="oval")
+    pid = LanePid()
+    # Centred on the straight, then 8 cm to the left, then turned by 0.05 rad.
+    for lateral, heading, want_y in ((-0.2, 0.0, 0.0), (-0.12, 0.0, -0.08)):
+        obs, _ = env.reset(seed=0, options={"start": (0.5, lateral, heading)})
+        for _ in range(3):
+            obs, *_ = env.step(np.zeros(1, np.float32))
+        centres, dirs = pid.lane_geometry(obs)
+        assert np.all(np.abs(centres[:, 1] - want_y) < 0.03), centres
+        assert np.all(np.abs(dirs[:, 1]) < 0.05)
+        assert 0.3 < centres[-1, 0] < centres[0, 0] < 1.5  # lower row nearer than upper
+
+
+def test_pid_steers_back_towards_the_lane_centre() -> None:
+    env = TfaldaTrackEnv(track="oval")
+    for lateral, sign in ((-0.12, -1.0), (-0.28, 1.0)):  # left of centre → steer right
+        pid = LanePid()
+        obs, _ = env.reset(seed=0, options={"start": (0.5, lateral, 0.0)})
+        assert np.sign(pid.act(obs)[0]) == sign
+
+
+def test_pid_laps_a_named_track_from_the_camera_alone() -> None:
+    result = drive(make_agent("pid"), load_named("oval"), laps=1, speed_m_s=1.5)
+    assert result.laps_completed == 1 and result.departures == 0
+    assert result.mean_abs_cross_track_m < 0.08
+    assert result.lap_times_s[0] == pytest.approx(load_named("oval").length_m / 1.5, rel=0.03)
+
+
+def test_a_departure_is_counted_and_the_car_put_back() -> None:
+    class Hard:
+        """Full left lock: leaves the road at once."""
+
+        def reset(self) -> None:
+            pass
+
+        def act(self, obs: np.ndarray) -> np.ndarray:
+            return np.ones(1, np.float32)
+
+    result = drive(Hard(), load_named("oval"), laps=1, max_steps=300)
+    assert result.departures >= 2 and result.laps_completed == 0 and result.ended == "steps"
+    ended = drive(Hard(), load_named("oval"), laps=1, recover=False)
+    assert ended.departures == 1 and ended.ended == "departure"

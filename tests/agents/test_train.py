@@ -1,0 +1,45 @@
+"""A short PPO run completes, saves its policy and improves the mean return."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import torch
+from stable_baselines3 import PPO
+
+from agents.drive import PpoAgent
+from agents.train import PpoConfig, train
+from envs import TfaldaTrackEnv
+
+
+def mean_return(policy: PpoAgent, episodes: int = 3, steps: int = 300) -> float:
+    env = TfaldaTrackEnv(track="oval")
+    returns = []
+    for k in range(episodes):
+        obs, _ = env.reset(seed=k)
+        total = 0.0
+        for _ in range(steps):
+            obs, reward, terminated, _, _ = env.step(policy.act(obs))
+            total += reward
+            if terminated:
+                break
+        returns.append(total)
+    return float(np.mean(returns))
+
+
+def test_short_ppo_training_improves_the_return(tmp_path) -> None:
+    torch.set_num_threads(1)
+    config = PpoConfig(n_steps=512, batch_size=128, learning_rate=1e-3)
+    # An untrained policy of the same architecture: the starting point.
+    untrained = PPO("MlpPolicy", TfaldaTrackEnv(track="oval"), seed=0, device="cpu",
+                    policy_kwargs={"net_arch": list(config.net_arch)})
+    untrained.save(tmp_path / "untrained.zip")
+    summary = train(6144, 1, 0, tmp_path / "run", config=config, progress=False,
+                    subprocess=False, track="oval")
+    assert (tmp_path / "run" / "policy.zip").is_file()
+    assert json.loads((tmp_path / "run" / "train.json").read_text())["timesteps"] == 6144
+    assert summary["train_time_s"] > 0 and list((tmp_path / "run" / "tb").iterdir())
+    before = mean_return(PpoAgent(tmp_path / "untrained.zip"))
+    after = mean_return(PpoAgent(tmp_path / "run" / "policy.zip"))
+    assert after > before + 50.0, (before, after)
