@@ -62,13 +62,13 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-    from envs import TfaldaTrackEnv
-
     cfg = config or PpoConfig()
     out.mkdir(parents=True, exist_ok=True)
     vec_cls = SubprocVecEnv if subprocess and n_envs > 1 else DummyVecEnv
-    venv = make_vec_env(TfaldaTrackEnv, n_envs=n_envs, seed=seed, vec_env_cls=vec_cls,
-                        env_kwargs=env_kwargs(speed_m_s, track=track))
+    # Through the registered id: Gymnasium's TimeLimit ends episodes after
+    # MAX_EPISODE_STEPS (without it a good policy drives one track forever).
+    venv = make_vec_env("tfalda_sim:TfaldaTrack-v0", n_envs=n_envs, seed=seed,
+                        vec_env_cls=vec_cls, env_kwargs=env_kwargs(speed_m_s, track=track))
     try:
         model = PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size,
                     n_epochs=cfg.n_epochs, learning_rate=cfg.learning_rate, gamma=cfg.gamma,
