@@ -39,6 +39,7 @@ class PpoAgent:
 
     def __init__(self, path: str | Path) -> None:
         try:
+            import torch
             from stable_baselines3 import PPO
         except ImportError as exc:
             raise ImportError("the PPO agent needs the rl extra: pip install torch==2.13.0 "
@@ -47,6 +48,9 @@ class PpoAgent:
         if not path.is_file():
             raise FileNotFoundError(f"no policy file {path}; train one with "
                                     "`tfalda-sim train` or use agents/policies/ppo.zip")
+        # One thread: a policy this small gains nothing from more, and evaluations run
+        # one process per core.
+        torch.set_num_threads(1)
         self.model = PPO.load(path, device="cpu")
 
     def reset(self) -> None:

@@ -421,8 +421,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
 
     def _image_faults(self) -> list[Fault]:
         """The image faults acting at this step, in schedule order."""
-        return [f for f in self._faults if isinstance(f, Blackout | Overexposure | Glare)
-                and f in active(self._faults, self._step_count, type(f))]
+        return active(self._faults, self._step_count, Blackout | Overexposure | Glare)
 
     def _observe(self) -> np.ndarray | dict[str, np.ndarray]:
         world = self._world

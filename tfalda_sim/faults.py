@@ -140,16 +140,16 @@ def check_schedule(faults: Sequence[object]) -> tuple[Fault, ...]:
     return tuple(faults)  # type: ignore[arg-type]
 
 
+def is_active(fault: Fault, step: int) -> bool:
+    """``fault`` acts at ``step`` (a marking gap is there all episode)."""
+    if isinstance(fault, MarkingGap):
+        return True
+    return fault.step <= step < fault.step + getattr(fault, "duration", 1)
+
+
 def active(faults: Sequence[Fault], step: int, kind: type) -> list:
-    """The faults of type ``kind`` acting at ``step``."""
-    out = []
-    for f in faults:
-        if isinstance(f, kind):
-            first = f.step
-            last = first + getattr(f, "duration", 1) - 1
-            if first <= step <= last:
-                out.append(f)
-    return out
+    """The faults of type ``kind`` acting at ``step``, in schedule order."""
+    return [f for f in faults if isinstance(f, kind) and is_active(f, step)]
 
 
 def with_gaps(track: Track, faults: Sequence[Fault]) -> Track:

@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import cv2
-import numpy as np
 
+from agents.oracle import OracleAgent
 from envs import TfaldaTrackEnv
 
 OUT = Path(__file__).resolve().parent.parent / "docs" / "env-render.png"
@@ -16,13 +15,9 @@ OUT = Path(__file__).resolve().parent.parent / "docs" / "env-render.png"
 def main() -> None:
     env = TfaldaTrackEnv(track=7, render_mode="rgb_array")
     env.reset(seed=0, options={"start": (0.0, -0.2, 0.0)})
-    world = env._world  # the docs picture steers with ground truth; agents use the lanes
+    oracle = OracleAgent(env)  # the picture steers with ground truth; agents use the lanes
     for _ in range(120):
-        pos = world.position()
-        kappa = float(world.track.curvature(pos.s_m))
-        a = (-3.0 * pos.cross_track_m - 1.2 * pos.heading_error_rad
-             + math.atan(env.car.wheelbase_m * kappa) / env.car.max_steer_rad)
-        env.step(np.array([np.clip(a, -1, 1)], np.float32))
+        env.step(oracle.act())
     cv2.imwrite(str(OUT), env.render()[..., ::-1])
     print(OUT)
 

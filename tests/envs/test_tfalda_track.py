@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import pickle
 import warnings
 
@@ -12,6 +11,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import tfalda_sim
+from agents.oracle import OracleAgent
 from envs import TfaldaTrackEnv
 from tfalda_sim.faults import Blackout, LateralKick, MarkingGap
 from tracks import load_named
@@ -131,12 +131,8 @@ def test_reset_options_place_the_car(oval_env: TfaldaTrackEnv) -> None:
 
 
 def centre_steering(env: TfaldaTrackEnv) -> np.ndarray:
-    """A ground-truth controller for the tests (the agents steer from the lanes)."""
-    pos = env._world.position()
-    a = -3.0 * pos.cross_track_m - 1.2 * pos.heading_error_rad
-    kappa = float(env._world.track.curvature(pos.s_m))
-    a += math.atan(env.car.wheelbase_m * kappa) / env.car.max_steer_rad
-    return np.array([np.clip(a, -1, 1)], np.float32)
+    """Ground-truth steering for the tests (the agents steer from the lanes)."""
+    return OracleAgent(env).act()
 
 
 def test_a_centred_drive_earns_about_one_per_step_and_counts_laps() -> None:
