@@ -65,3 +65,10 @@ def test_train_refuses_to_replace_a_policy(tmp_path: Path,
     code, _, err = run(capsys, "train", "--out", str(tmp_path), "--timesteps", "10")
     assert code == 2 and "exists" in err
     assert (tmp_path / "policy.zip").read_bytes() == b"x"
+
+
+def test_the_committed_ppo_policy_drives_a_lap(capsys: pytest.CaptureFixture[str]) -> None:
+    code, out, _ = run(capsys, "drive", "--agent", "ppo", "--track", "oval", "--laps", "1",
+                       "--no-recover", "--json")
+    summary = json.loads(out)
+    assert code == 0 and summary["laps_completed"] == 1 and summary["departures"] == 0
