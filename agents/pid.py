@@ -3,21 +3,20 @@
 Each step it decodes the four lanes of the ``"lanes"`` observation (``envs.observation``),
 takes their ends back to the ground through the car's own camera model (a calibration,
 not track knowledge) and, per ROI row, forms the lane centre between the left and right
-line and the lane direction. With the lower row's centre ``c`` [m] (about 0.5 m ahead)
-and direction ``ψ`` [rad] and the upper row's centre ``c_up`` (about 1 m ahead):
+line and the lane direction. A lane model — the lane centre ``y(x) = y0 + ψ0·x + κ·x²/2``
+ahead of the rear axle — is tracked over the frames with the car's odometry (its speed
+and wheel angle, also in the observation); rows that disagree with the prediction, and
+the frames of an LIS reset, are not believed. At ``x_c`` (0.5 m, about the lower row):
 
-    δ = atan(L κ)  +  K_p · c_y  +  K_d · ψ  +  K_i · ∫ c_y dt
+    δ = atan(L κ)  +  K_p · y(x_c)  +  K_d · ψ(x_c)  +  K_i · ∫ y(x_c) dt
 
-- feed-forward: ``κ`` is the curvature of the circle through ``c`` along ``ψ`` and through
-  ``c_up``, i.e. the curve the upper row sees coming; ``L`` the wheelbase;
-- P: the lane centre's lateral offset ``c_y`` (left positive) in the lower row;
+- feed-forward: the model's curvature ``κ`` (the upper row sees the curve coming);
+- P: the lane centre's lateral offset (left positive);
 - D: the offset's rate is ``v sin ψ``, so the lane direction is its measured derivative
   (no differencing of noisy offsets);
 - I: removes the steady offset a curve's servo lag leaves.
 
-A row whose two lines are not a lane's width apart (one line lost) is rebuilt from the
-line whose implied centre is nearer the last good one. ``δ`` is sent as
-``δ / max_steer`` clipped to [−1, 1].
+``δ`` is sent as ``δ / max_steer`` clipped to [−1, 1]. docs/agents.md has the results.
 """
 
 from __future__ import annotations
@@ -160,9 +159,9 @@ class LanePid:
         ok = np.all(np.isfinite(centres), axis=1) & np.all(np.isfinite(dirs), axis=1)
         psi = np.arctan2(dirs[:, 1], dirs[:, 0])
         if self._model is None:
-            prior = None
+            prior = predicted = None
         else:
-            prior = self._predict(odometry)
+            prior = predicted = self._predict(odometry)
             y_pred = _basis(centres[:, 0]) @ prior
             ok &= np.abs(centres[:, 1] - y_pred) <= g.gate_m
             if not ok.any():
@@ -183,7 +182,8 @@ class LanePid:
             rows += np.eye(3).tolist()
             rhs += prior.tolist()
             weights += (1.0 / _PRIOR_SIGMA**2).tolist()
-        if not rows:
+        if not rows:  # nothing seen (a reset frame) and nothing to coast on any more
+            self._model = predicted if predicted is not None else self._model
             return self._model if self._model is not None else np.zeros(3)
         a = np.array(rows) * np.sqrt(weights)[:, None]
         b = np.array(rhs) * np.sqrt(weights)
