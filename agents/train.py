@@ -10,7 +10,6 @@ command's arguments, the training time, the machine). Needs the ``rl`` extra.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -88,28 +87,19 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
                    "net_arch": list(cfg.net_arch)},
                "train_time_s": elapsed, "cores": os.cpu_count(),
                "python": platform.python_version(),
-               "command": "python -m agents.train " + " ".join(sys.argv[1:])}
+               # The CLI command that repeats this run (train()'s own arguments).
+               "command": (f"tfalda-sim train --timesteps {timesteps} --n-envs {n_envs} "
+                           f"--seed {seed} --speed {speed_m_s:g} --out {out}"
+                           + (f"  (Python: track={track!r})" if track is not None else ""))}
     (out / "train.json").write_text(json.dumps(summary, indent=2))
     return summary
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--timesteps", type=int, default=1_000_000)
-    parser.add_argument("--n-envs", type=int, default=2)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--speed", type=float, default=TRAIN_SPEED_M_S, help="[m/s]")
-    parser.add_argument("--out", type=Path, default=Path("runs/ppo"))
-    parser.add_argument("--json", action="store_true", help="print the summary as JSON")
-    args = parser.parse_args(argv)
-    if args.timesteps < 1 or args.n_envs < 1:
-        parser.error("--timesteps and --n-envs must be ≥ 1")
-    summary = train(args.timesteps, args.n_envs, args.seed, args.out, speed_m_s=args.speed,
-                    progress=not args.json)
-    print(json.dumps(summary) if args.json else
-          f"trained {args.timesteps} steps in {summary['train_time_s']:.0f} s → "
-          f"{args.out / 'policy.zip'}")
-    return 0
+    """``python -m agents.train …`` is ``tfalda-sim train …``."""
+    from tfalda_sim.cli import main as cli_main
+
+    return cli_main(["train", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":

@@ -125,6 +125,15 @@ _PAD = -8.0
 """Map coordinate for padding pixels: outside the atlas (reads 0)."""
 
 
+@njit(cache=True)
+def _texel_transform(affine: np.ndarray, size_x: float, size_y: float) -> tuple:
+    """``affine``'s six entries as float32, then the clamp range of level-0 texel
+    coordinates: a zero guard band of 2 texels below and 1 above the level's size."""
+    f = np.float32
+    return (f(affine[0]), f(affine[1]), f(affine[2]), f(affine[3]), f(affine[4]),
+            f(affine[5]), f(-2.0), f(size_x + 1.0), f(size_y + 1.0))
+
+
 @njit(cache=True, error_model="numpy")
 def _atlas_maps(map_x: np.ndarray, map_y: np.ndarray, rows: np.ndarray, cols: np.ndarray,
                 widths: np.ndarray, offsets: np.ndarray, coord_a: np.ndarray,
@@ -141,12 +150,7 @@ def _atlas_maps(map_x: np.ndarray, map_y: np.ndarray, rows: np.ndarray, cols: np
     ``bias``. Other pixels: ``coord_a`` is the wall column at yaw 0, ``coord_b`` the atlas
     row; the column turns with the car and wraps around the cylinder. Both are computed
     and one is selected, so the loop has no branch and vectorises."""
-    a00, a01, a02, a10, a11, a12 = (np.float32(affine[0]), np.float32(affine[1]),
-                                    np.float32(affine[2]), np.float32(affine[3]),
-                                    np.float32(affine[4]), np.float32(affine[5]))
-    lo = np.float32(-2.0)
-    hx = np.float32(size_x + 1.0)
-    hy = np.float32(size_y + 1.0)
+    a00, a01, a02, a10, a11, a12, lo, hx, hy = _texel_transform(affine, size_x, size_y)
     shift = np.float32(wall_shift)
     wrap = np.float32(wall_cols)
     one = np.float32(1.0)
@@ -184,12 +188,7 @@ def _light_maps(light_x: np.ndarray, light_y: np.ndarray, rows: np.ndarray, cols
                 light_scale: float) -> None:
     """Light-map coordinates of the pieces' ground hits, packed as in ``_atlas_maps``
     (level-0 texel coordinates scaled by ``light_scale``, texel centres at integers)."""
-    a00, a01, a02, a10, a11, a12 = (np.float32(affine[0]), np.float32(affine[1]),
-                                    np.float32(affine[2]), np.float32(affine[3]),
-                                    np.float32(affine[4]), np.float32(affine[5]))
-    lo = np.float32(-2.0)
-    hx = np.float32(size_x + 1.0)
-    hy = np.float32(size_y + 1.0)
+    a00, a01, a02, a10, a11, a12, lo, hx, hy = _texel_transform(affine, size_x, size_y)
     ls = np.float32(light_scale)
     half = np.float32(0.5)
     end = 0
