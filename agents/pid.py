@@ -6,15 +6,22 @@ not track knowledge) and, per ROI row, forms the lane centre between the left an
 line and the lane direction. A lane model — the lane centre ``y(x) = y0 + ψ0·x + κ·x²/2``
 ahead of the rear axle — is tracked over the frames with the car's odometry (its speed
 and wheel angle, also in the observation); rows that disagree with the prediction, and
-the frames of an LIS reset, are not believed. At ``x_c`` (0.5 m, about the lower row):
+the frames of an LIS reset, are not believed. The car steers along the model:
 
-    δ = atan(L κ)  +  K_p · y(x_c)  +  K_d · ψ(x_c)  +  K_i · ∫ y(x_c) dt
+    δ = atan(L κ)  +  K_p · (y0 + ψ0·x_c)  +  K_d · ψ0  +  K_i · ∫ (y0 + ψ0·x_c) dt
 
-- feed-forward: the model's curvature ``κ`` (the upper row sees the curve coming);
-- P: the lane centre's lateral offset (left positive);
-- D: the offset's rate is ``v sin ψ``, so the lane direction is its measured derivative
-  (no differencing of noisy offsets);
-- I: removes the steady offset a curve's servo lag leaves.
+- feed-forward: the model's curvature ``κ`` (the upper row sees the curve coming) is the
+  whole steering a car on the lane centre needs;
+- P: the lateral offset, ``x_c`` (0.5 m) ahead of the rear axle, of the lane centre's
+  *tangent* at the axle (left positive) — not of the lane itself, which in a curve of
+  curvature κ lies κ·x_c²/2 aside even for a car on the centre line: controlling that
+  point held the car κ·(x_c²/2 + K_d·x_c/K_p) off centre, 11 cm in a 2 m curve;
+- D: the lane direction at the axle (the offset's rate is ``v sin ψ0``: its measured
+  derivative, no differencing of noisy offsets);
+- I: removes the steady offset the servo's lag leaves when a curve begins.
+
+With the tangent, the equilibrium in a curve of constant curvature is ``y0 = ψ0 = 0``:
+the car on the lane centre, steering ``atan(L κ)``.
 
 ``δ`` is sent as ``δ / max_steer`` clipped to [−1, 1]. docs/agents.md has the results.
 """
@@ -37,8 +44,8 @@ width [m]."""
 
 
 CONTROL_DISTANCE_M: float = 0.5
-"""Distance ahead of the rear axle where the lane offset and direction are controlled [m]
-(about the lower ROI row)."""
+"""Distance ahead of the rear axle where the offset of the lane centre's tangent is
+controlled [m] (about the lower ROI row)."""
 
 _SIGMA_Y_M = 0.03  # lane-centre measurement noise [m]
 _SIGMA_PSI_RAD = 0.1  # lane-direction measurement noise [rad]
@@ -61,9 +68,11 @@ class PidGains:
     1.5 m/s (docs/agents.md)."""
 
     k_p: float = 2.0
-    """Steering per metre of lane-centre offset in the lower ROI row [rad/m]."""
+    """Steering per metre of lateral offset of the lane centre's tangent at
+    ``control_distance_m`` [rad/m]."""
     k_d: float = 0.6
-    """Steering per radian of lane direction (the offset's derivative / speed) [rad/rad]."""
+    """Steering per radian of lane direction at the rear axle (the offset's derivative /
+    speed) [rad/rad]."""
     k_i: float = 0.3
     """Steering per metre-second of integrated offset [rad/(m·s)]."""
     i_limit: float = 0.15
@@ -74,7 +83,7 @@ class PidGains:
     """A row's lane centre that lies farther than this from where the last one, moved by
     the car's odometry, predicts it is rejected for the prediction [m]."""
     control_distance_m: float = CONTROL_DISTANCE_M
-    """Where ahead of the rear axle the lane offset and direction are controlled [m]."""
+    """Where ahead of the rear axle the offset of the lane's tangent is controlled [m]."""
     coast_on_reset: bool = True
     """Ignore the lanes of an LIS reset frame and the first frame after it."""
     max_coast_frames: int = 25
@@ -101,7 +110,8 @@ class LanePid:
 
     def lane_geometry(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per ROI row (top first): the lane centre ``(R, 2)`` and unit direction
-        ``(R, 2)`` in the car frame [m], from the observation vector."""
+        ``(R, 2)`` in the car frame [m], from the observation vector; NaN for a row whose
+        two lanes are both missing."""
         v = np.asarray(obs["lanes"] if isinstance(obs, dict) else obs, np.float64).ravel()
         rows = (len(v) - 10) // 16
         if rows < 1 or 16 * rows + 10 != len(v):
@@ -109,6 +119,8 @@ class LanePid:
         n = 2 * rows
         lanes = v[:4 * n].reshape(n, 4) * [IMAGE_WIDTH_PX, IMAGE_HEIGHT_PX,
                                            IMAGE_WIDTH_PX, IMAGE_HEIGHT_PX]
+        # A missing lane reads −1: it must not go through the camera model as a pixel.
+        lanes[np.any(v[:4 * n].reshape(n, 4) < 0.0, axis=1)] = np.nan
         ends = self.camera.pixels_to_ground(lanes.reshape(2 * n, 2)).reshape(n, 2, 2)
         top, bottom = ends[:, 0], ends[:, 1]
         mid = 0.5 * (top + bottom)
@@ -117,7 +129,11 @@ class LanePid:
         dirs = np.empty((rows, 2))
         for r in range(rows):
             left, right = 2 * r, 2 * r + 1
-            d = direction[left] + direction[right]
+            seen = [i for i in (left, right) if np.all(np.isfinite(direction[i]))]
+            if not seen:
+                centres[r] = dirs[r] = np.nan
+                continue
+            d = sum(direction[i] for i in seen)
             d = d / max(np.hypot(*d), 1e-9)
             normal = np.array([-d[1], d[0]])  # to the left
             width = float(np.dot(mid[left] - mid[right], normal))
@@ -128,11 +144,10 @@ class LanePid:
                 # the last good centre (or the right line, the side line, at the start).
                 options = [mid[left] - 0.5 * LANE_WIDTH_M * normal,
                            mid[right] + 0.5 * LANE_WIDTH_M * normal]
-                ref = (self._last_centres[r] if self._last_centres is not None
-                       else options[1])
-                ok = [o for o in options if np.all(np.isfinite(o))]
-                centre = (min(ok, key=lambda o: float(np.hypot(*(o - ref)))) if ok
-                          else ref)
+                options = [o for o in options if np.all(np.isfinite(o))]
+                last = None if self._last_centres is None else self._last_centres[r]
+                ref = last if last is not None and np.all(np.isfinite(last)) else options[-1]
+                centre = min(options, key=lambda o: float(np.hypot(*(o - ref))))
             centres[r], dirs[r] = centre, d
         return centres, dirs
 
@@ -209,8 +224,8 @@ class LanePid:
         y0, psi0, kappa = self._track(centres, dirs, odometry)
         self._last_centres = centres
         x = self.gains.control_distance_m
-        offset = y0 + psi0 * x + 0.5 * kappa * x * x
-        heading = psi0 + kappa * x
+        offset = y0 + psi0 * x
+        heading = psi0
         self._integral += offset * self.dt_s
         i_term = float(np.clip(g.k_i * self._integral, -g.i_limit, g.i_limit))
         self._integral = i_term / g.k_i if g.k_i > 0 else 0.0
