@@ -29,7 +29,7 @@ from tracks.named import NAMED_TRACKS, named_path
 from tracks.preview import write_preview
 from tracks.rules import MAT_EDGE_MARGIN_M, Violation, validate
 
-from .evaluation.command import add_evaluate_parser
+from .evaluation.command import add_compare_parser, add_evaluate_parser
 
 
 def track_summary(track: Track, violations: list[Violation]) -> dict[str, Any]:
@@ -258,6 +258,7 @@ def build_parser() -> argparse.ArgumentParser:
     ren.set_defaults(func=_cmd_render)
 
     add_evaluate_parser(sub)
+    add_compare_parser(sub)
     add_drive_parser(sub)
     add_train_parser(sub)
     add_stress_parser(sub)

@@ -213,3 +213,73 @@ def _print_table(out: dict[str, Any]) -> None:
     for key in ("plot", "xml", "jsonl", "video"):
         if key in out:
             print(f"wrote {out[key]}")
+
+
+COMPARE_FILES = {"json": "compare.json", "md": "compare.md", "png": "compare.png"}
+"""What ``tfalda-sim compare --out DIR`` writes into DIR."""
+
+
+def _thesis_list(text: str) -> tuple[str, ...]:
+    kinds = tuple(k.strip() for k in text.split(",") if k.strip())
+    bad = [k for k in kinds if k not in ("straight", "curve", "track")]
+    if bad or not kinds:
+        raise argparse.ArgumentTypeError(
+            f"--thesis takes straight, curve and/or track, comma-separated; got {text!r}")
+    return kinds
+
+
+def add_compare_parser(sub: Any) -> None:
+    cp = sub.add_parser(
+        "compare", help="score the Hough baseline against TFALDA with and without the LIS",
+        description="Render the thesis' scenarios and generated tracks once, run the Hough "
+                    "baseline (seed values and simulator preset) and TFALDA with and "
+                    "without the LIS on every frame, and score all of them against the "
+                    "same ground truth: hit rate, false positives, ego lines found, ms "
+                    "per frame (tfalda_sim/evaluation/baseline.py).")
+    cp.add_argument("--thesis", type=_thesis_list, default=("straight", "curve", "track"),
+                    help="thesis scenarios, comma-separated (default: straight,curve,track)")
+    cp.add_argument("--no-thesis", action="store_true", help="generated tracks only")
+    cp.add_argument("--seeds", type=seed_range_arg, default=range(10000, 10010),
+                    help="generated tracks A:B, one lap each (default 10000:10010, held out)")
+    cp.add_argument("--no-generated", action="store_true", help="thesis scenarios only")
+    cp.add_argument("--max-frames", type=positive_int_arg,
+                    help="cut each generated lap after this many frames")
+    cp.add_argument("--workers", type=positive_int_arg,
+                    help="processes (default: the CPUs available)")
+    cp.add_argument("--out", type=Path,
+                    help="write compare.json, compare.md and compare.png into this directory")
+    cp.add_argument("--force", action="store_true", help="overwrite existing output files")
+    cp.add_argument("--json", action="store_true", help="print one JSON object")
+    cp.set_defaults(func=cmd_compare)
+
+
+def cmd_compare(args: argparse.Namespace) -> int:
+    from .baseline import compare, markdown_table, plot
+
+    thesis = () if args.no_thesis else args.thesis
+    seeds = range(0) if args.no_generated else args.seeds
+    if not thesis and not len(seeds):
+        raise CliError("--no-thesis and --no-generated leave nothing to compare")
+    if args.out is not None:
+        if args.out.exists() and not args.out.is_dir():
+            raise CliError(f"--out {args.out} is a file; give a directory")
+        existing = [str(args.out / f) for f in COMPARE_FILES.values()
+                    if (args.out / f).exists()]
+        if existing and not args.force:
+            raise CliError(f"{', '.join(existing)} exists; add --force to overwrite")
+    result = compare(thesis, seeds, max_frames=args.max_frames, workers=args.workers,
+                     progress=sys.stderr.isatty() or not args.json)
+    table = markdown_table(result)
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / COMPARE_FILES["json"]).write_text(json.dumps(result, indent=1))
+        (args.out / COMPARE_FILES["md"]).write_text(table)
+        plot(result, args.out / COMPARE_FILES["png"])
+        result["out"] = {k: str(args.out / f) for k, f in COMPARE_FILES.items()}
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(table, end="")
+        if args.out is not None:
+            print(f"wrote {', '.join(result['out'].values())}")
+    return 0

@@ -1,0 +1,308 @@
+"""The Hough baseline against TFALDA (with and without the LIS): the same rendered frames,
+the same ground truth, one metric for both.
+
+The two detectors give different things — TFALDA one lane per ROI (four), the Hough
+baseline up to five line segments anywhere in its crop — so both are scored as a set of
+line segments in image pixels:
+
+- **hit rate**: the thesis' black-box test (section 4.1.7, ``lane_hit_rates``): the share
+  of a line's pixels within ε (5 px) of a painted longitudinal marking; per frame the mean
+  over the lines given, 0 for a frame without any line (the thesis scores a missing lane 0);
+- **false positive**: a line with less than half of it on a marking
+  (``LANE_FAILURE_HIT_RATE``) — a line where there is none;
+- **ego lines found**: the share of frames in which the car's own lane boundaries (left:
+  the centre line, right: the side line), where visible in the rows both detectors look
+  at, are found by some line: TuSimple's point accuracy of the line against the boundary
+  ≥ 0.85 over at least ``MIN_MATCH_ROWS`` rows;
+- **compute time**: wall-clock time of the detector alone per frame [ms] (TFALDA + LIS:
+  the thesis pipeline on the full frame; Hough: the seed's steps), in the same process.
+
+``compare`` runs the thesis' scenarios and generated tracks (seeds in a process pool);
+``tfalda-sim compare`` prints the table, ``--json``, and writes JSON, Markdown and a PNG.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import time
+from collections.abc import Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from ..perception import DetectorConfig, HoughConfig, HoughDetector, LaneObservation
+from ..perception.hough import CROP_HEIGHT_PX, CROP_TOP_PX
+from ..rendering import FrameTruth, Renderer
+from .metrics import (
+    EPSILON_PX,
+    LANE_FAILURE_HIT_RATE,
+    TUSIMPLE_MIN_ACCURACY,
+    boundary_x_at_rows,
+    lane_hit_rates,
+    lane_x_at_rows,
+    truth_distance,
+    tusimple_accuracy,
+)
+from .runner import WITH_LIS, WITHOUT_LIS, run_scenario
+from .scenarios import Scenario, ScenarioKind, generated_scenario, thesis_scenario
+
+HOUGH_SEED = "Hough (seed values)"
+HOUGH_SIMULATOR = "Hough (simulator preset)"
+
+MIN_MATCH_ROWS: int = 10
+"""A line finds an ego boundary only over at least this many image rows [px]."""
+
+BAND_ROWS: tuple[int, int] = (CROP_TOP_PX, CROP_TOP_PX + CROP_HEIGHT_PX)
+"""Image rows [first, stop) [px] in which an ego boundary counts as visible: the Hough
+crop (rows 219–477), which holds TFALDA's ROIs (rows 260–425) too."""
+
+MIN_VISIBLE_ROWS: int = 20
+"""An ego boundary is visible in a frame when it crosses at least this many rows of the
+band [px]."""
+
+
+def hough_detectors() -> dict[str, HoughConfig]:
+    """The Hough runs of the comparison: the seed's numbers as they are, and the simulator
+    preset (the binarising level of our markings, our car's bonnet as the mask)."""
+    return {HOUGH_SEED: HoughConfig(), HOUGH_SIMULATOR: HoughConfig.simulator()}
+
+
+def tfalda_detectors() -> dict[str, DetectorConfig]:
+    """The TFALDA runs: the thesis' configuration with and without the LIS."""
+    return {WITH_LIS: DetectorConfig.thesis(), WITHOUT_LIS: DetectorConfig.without_lis()}
+
+
+@dataclass(frozen=True)
+class LineScore:
+    """One frame's lines ``(N, 4)`` (x1, y1, x2, y2) [px] against the truth."""
+
+    hit_rates: np.ndarray
+    """(N,) black-box hit rate of each line [0, 1]."""
+    false_positive: np.ndarray
+    """(N,) bool: the line lies mostly off the markings."""
+    ego_visible: np.ndarray
+    """(2,) bool: the ego lane's left, right boundary crosses the band."""
+    ego_found: np.ndarray
+    """(2,) bool: a line follows the visible left, right boundary."""
+
+    @property
+    def confidence(self) -> float:
+        """The frame's mean hit rate, 0 without any line."""
+        return float(self.hit_rates.mean()) if len(self.hit_rates) else 0.0
+
+
+def _follows(line: np.ndarray, boundary: np.ndarray) -> bool:
+    """The line matches the boundary polyline over its rows (TuSimple, ≥ MIN_MATCH_ROWS)."""
+    y0, y1 = sorted((float(line[1]), float(line[3])))
+    rows = np.arange(np.ceil(y0), np.floor(y1) + 1)
+    if len(rows) < MIN_MATCH_ROWS:
+        return False
+    truth_x = boundary_x_at_rows(boundary, rows)
+    if np.isfinite(truth_x).sum() < MIN_MATCH_ROWS:
+        return False
+    return tusimple_accuracy(lane_x_at_rows(line, rows), truth_x, rows) >= TUSIMPLE_MIN_ACCURACY
+
+
+def score_lines(lines: np.ndarray, truth: FrameTruth, distance: np.ndarray | None = None, *,
+                epsilon_px: float = EPSILON_PX) -> LineScore:
+    """Score a frame's lines ``(N, 4)`` [px]; rows with a non-finite value are no line.
+    Pass ``distance`` (``truth_distance(truth.labels)``) to reuse it."""
+    lines = np.asarray(lines, np.float64).reshape(-1, 4)
+    lines = lines[np.all(np.isfinite(lines), axis=1)]
+    if distance is None:
+        distance = truth_distance(truth.labels)
+    hits = lane_hit_rates(lines, distance, epsilon_px)
+    band = np.arange(*BAND_ROWS, dtype=np.float64)
+    visible = np.zeros(2, bool)
+    found = np.zeros(2, bool)
+    for k, boundary in enumerate((truth.left_boundary_px, truth.right_boundary_px)):
+        visible[k] = np.isfinite(boundary_x_at_rows(boundary, band)).sum() >= MIN_VISIBLE_ROWS
+        found[k] = visible[k] and any(_follows(line, boundary) for line in lines)
+    return LineScore(hit_rates=hits, false_positive=hits < LANE_FAILURE_HIT_RATE,
+                     ego_visible=visible, ego_found=found)
+
+
+@dataclass
+class Tally:
+    """One detector's sums over frames (tallies of several tracks add up with ``+``)."""
+
+    frames: int = 0
+    confidence_sum: float = 0.0
+    frames_without_line: int = 0
+    lines: int = 0
+    false_positives: int = 0
+    ego_visible: np.ndarray = field(default_factory=lambda: np.zeros(2, np.int64))
+    ego_found: np.ndarray = field(default_factory=lambda: np.zeros(2, np.int64))
+    times_s: list[float] = field(default_factory=list)
+
+    def add(self, score: LineScore, time_s: float) -> None:
+        self.frames += 1
+        self.confidence_sum += score.confidence
+        self.frames_without_line += int(len(score.hit_rates) == 0)
+        self.lines += len(score.hit_rates)
+        self.false_positives += int(score.false_positive.sum())
+        self.ego_visible += score.ego_visible
+        self.ego_found += score.ego_found
+        self.times_s.append(time_s)
+
+    def __add__(self, other: Tally) -> Tally:
+        return Tally(self.frames + other.frames, self.confidence_sum + other.confidence_sum,
+                     self.frames_without_line + other.frames_without_line,
+                     self.lines + other.lines, self.false_positives + other.false_positives,
+                     self.ego_visible + other.ego_visible, self.ego_found + other.ego_found,
+                     self.times_s + other.times_s)
+
+    def summary(self) -> dict[str, Any]:
+        """The figures (rates in [0, 1], times in ms)."""
+        n = max(self.frames, 1)
+        found = [float(f / v) if v else None
+                 for f, v in zip(self.ego_found, self.ego_visible, strict=True)]
+        t = np.array(self.times_s) * 1e3
+        return {
+            "frames": self.frames,
+            "hit_rate": self.confidence_sum / n,
+            "lines_per_frame": self.lines / n,
+            "frames_without_line": self.frames_without_line,
+            "false_positives_per_frame": self.false_positives / n,
+            "false_positive_share": self.false_positives / max(self.lines, 1),
+            "ego_left_found": found[0],
+            "ego_right_found": found[1],
+            "ms_per_frame_median": float(np.median(t)) if len(t) else None,
+            "ms_per_frame_p95": float(np.percentile(t, 95)) if len(t) else None,
+        }
+
+
+def compare_scenario(scenario: Scenario, *, renderer: Renderer | None = None,
+                     hough: Mapping[str, HoughConfig] | None = None,
+                     tfalda: Mapping[str, DetectorConfig] | None = None,
+                     epsilon_px: float = EPSILON_PX, progress: bool = False
+                     ) -> dict[str, Tally]:
+    """Every detector on every frame of ``scenario``: a tally per detector label."""
+    hough = hough_detectors() if hough is None else dict(hough)
+    tfalda = tfalda_detectors() if tfalda is None else dict(tfalda)
+    if not tfalda:
+        raise ValueError("give at least one TFALDA configuration (the frames come from its "
+                         "scenario runner)")
+    if set(hough) & set(tfalda):
+        raise ValueError("detector labels must differ, both have "
+                         f"{sorted(set(hough) & set(tfalda))}")
+    detectors = {label: HoughDetector(cfg) for label, cfg in hough.items()}
+    tallies = {label: Tally() for label in (*tfalda, *hough)}
+    scores: dict[str, list[LineScore]] = {label: [] for label in tfalda}
+
+    def on_frame(seq: int, frame: np.ndarray, truth: FrameTruth,
+                 observations: Mapping[str, LaneObservation]) -> None:
+        distance = truth_distance(truth.labels)
+        for label, obs in observations.items():
+            scores[label].append(score_lines(obs.lanes, truth, distance, epsilon_px=epsilon_px))
+        for label, det in detectors.items():
+            t0 = time.perf_counter()
+            segments = det.detect(frame).segments
+            dt = time.perf_counter() - t0
+            tallies[label].add(score_lines(segments, truth, distance, epsilon_px=epsilon_px), dt)
+
+    runs = run_scenario(scenario, tfalda, renderer=renderer, epsilon_px=epsilon_px,
+                        progress=progress, on_frame=on_frame)
+    for label, run in runs.items():  # TFALDA's time as the runner measured it
+        for score, dt in zip(scores[label], run.detector_s, strict=True):
+            tallies[label].add(score, float(dt))
+    return tallies
+
+
+_RENDERER: Renderer | None = None
+
+
+def _one(job: tuple[str, int | None, int | None]) -> tuple[str, dict[str, Tally]]:
+    global _RENDERER
+    if _RENDERER is None:  # one per worker process: its pixel geometry is costly
+        _RENDERER = Renderer()
+    kind, seed, max_frames = job
+    if seed is None:
+        scenario = thesis_scenario(ScenarioKind(kind))
+        group = kind
+    else:
+        scenario = generated_scenario(seed, max_frames=max_frames)
+        group = "generated"
+    return group, compare_scenario(scenario, renderer=_RENDERER)
+
+
+def compare(thesis: Sequence[str] = ("straight", "curve", "track"),
+            seeds: Sequence[int] = range(10000, 10010), *, max_frames: int | None = None,
+            workers: int | None = None, progress: bool = False) -> dict[str, Any]:
+    """The thesis scenarios (each its own group) and the generated tracks ``seeds`` (one
+    lap each, pooled as "generated"), every detector on the same frames."""
+    for kind in thesis:
+        if kind not in ("straight", "curve", "track"):
+            raise ValueError(f"unknown thesis scenario {kind!r}; use straight, curve, track")
+    jobs = [(kind, None, None) for kind in thesis] + [("random", int(s), max_frames)
+                                                     for s in seeds]
+    if not jobs:
+        raise ValueError("nothing to compare: give thesis scenarios or seeds")
+    if workers is None:
+        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
+    with contextlib.ExitStack() as stack:
+        if workers > 1 and len(jobs) > 1:
+            pool = stack.enter_context(ProcessPoolExecutor(max_workers=min(workers, len(jobs))))
+            mapped = pool.map(_one, jobs)
+        else:
+            mapped = map(_one, jobs)
+        results = list(tqdm(mapped, total=len(jobs), desc="scenarios", unit="scenario",
+                            disable=not progress))
+    groups: dict[str, dict[str, Tally]] = {}
+    for group, tallies in results:
+        into = groups.setdefault(group, {})
+        for label, tally in tallies.items():
+            into[label] = into[label] + tally if label in into else tally
+    return {
+        "thesis_scenarios": list(thesis), "seeds": [int(s) for s in seeds],
+        "max_frames": max_frames, "epsilon_px": EPSILON_PX,
+        "groups": {group: {label: t.summary() for label, t in tallies.items()}
+                   for group, tallies in groups.items()},
+    }
+
+
+def markdown_table(result: Mapping[str, Any]) -> str:
+    """The comparison as a Markdown table (one row per scenario group and detector)."""
+    head = ("| scenario | detector | frames | hit rate | false positives / frame | FP share "
+            "| ego left found | ego right found | ms / frame (median) |")
+    lines = [head, "|" + "---|" * 9]
+
+    def pct(v: float | None) -> str:
+        return "–" if v is None else f"{100 * v:.0f} %"
+
+    for group, runs in result["groups"].items():
+        for label, s in runs.items():
+            lines.append(
+                f"| {group} | {label} | {s['frames']} | {s['hit_rate']:.3f} "
+                f"| {s['false_positives_per_frame']:.2f} | {pct(s['false_positive_share'])} "
+                f"| {pct(s['ego_left_found'])} | {pct(s['ego_right_found'])} "
+                f"| {s['ms_per_frame_median']:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(result: Mapping[str, Any], path: str | os.PathLike[str]) -> None:
+    """Grouped bars: hit rate, false positives per frame and ms per frame per detector."""
+    from .charts import _pyplot, _save
+
+    plt = _pyplot()
+    groups = list(result["groups"])
+    labels = list(next(iter(result["groups"].values())))
+    metrics = (("hit_rate", "hit rate"), ("false_positives_per_frame", "false positives / frame"),
+               ("ms_per_frame_median", "ms / frame (median)"))
+    fig, axes = plt.subplots(1, len(metrics), figsize=(15, 4.2))
+    width = 0.8 / len(labels)
+    x = np.arange(len(groups))
+    for ax, (key, title) in zip(axes, metrics, strict=True):
+        for k, label in enumerate(labels):
+            values = [result["groups"][g][label][key] or 0.0 for g in groups]
+            ax.bar(x + (k - (len(labels) - 1) / 2) * width, values, width, label=label)
+        ax.set_xticks(x, groups)
+        ax.set_title(title)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0].legend(fontsize=8, loc="lower left")
+    fig.suptitle("Hough baseline vs TFALDA (same frames, same ground truth)")
+    _save(fig, path)
