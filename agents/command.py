@@ -34,7 +34,9 @@ def add_drive_parser(sub: Any) -> None:
     dr.add_argument("--no-recover", action="store_true",
                     help="end the drive at the first departure (default: put the car back)")
     dr.add_argument("--video", type=Path, help="MP4 of the drive with ROIs, lanes and a map")
-    dr.add_argument("--force", action="store_true", help="overwrite an existing video")
+    dr.add_argument("--camera-video", type=Path,
+                    help="MP4 of the bare grey camera frames (for tfalda-sim replay)")
+    dr.add_argument("--force", action="store_true", help="overwrite existing videos")
     dr.add_argument("--json", action="store_true", help="print one JSON object")
     dr.set_defaults(func=_cmd_drive)
 
@@ -42,7 +44,8 @@ def add_drive_parser(sub: Any) -> None:
 def _cmd_drive(args: argparse.Namespace) -> int:
     from .drive import drive, make_agent
 
-    check_outputs({"video": args.video}, {"video": ".mp4"}, args.force)
+    check_outputs({"video": args.video, "camera-video": args.camera_video},
+                  {"video": ".mp4", "camera-video": ".mp4"}, args.force)
     if args.track in NAMED_TRACKS:
         track, label = load_named(args.track), args.track
     elif args.track.isdigit():
@@ -61,11 +64,14 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     except (ValueError, FileNotFoundError, ImportError) as exc:
         raise CliError(str(exc)) from None
     result = drive(agent, track, laps=args.laps, speed_m_s=args.speed,
-                   recover=not args.no_recover, video=args.video, label=label,
+                   recover=not args.no_recover, video=args.video,
+                   camera_video=args.camera_video, label=label,
                    progress=not args.json)
     summary = result.summary() | {"agent": args.agent, "speed_m_s": args.speed}
     if args.video:
         summary["video"] = str(args.video)
+    if args.camera_video:
+        summary["camera_video"] = str(args.camera_video)
     if args.json:
         print(json.dumps(summary))
     else:
@@ -77,8 +83,9 @@ def _cmd_drive(args: argparse.Namespace) -> int:
               f"max {result.max_abs_cross_track_m * 100:.1f} cm")
         print(f"  departures {result.departures}, LIS resets {result.lis_resets}, mean hit "
               f"rate {result.mean_hit_rate:.3f}")
-        if args.video:
-            print(f"  wrote {args.video}")
+        for path in (args.video, args.camera_video):
+            if path:
+                print(f"  wrote {path}")
     return 0 if result.laps_completed == args.laps else 1
 
 

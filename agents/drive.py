@@ -104,10 +104,13 @@ class DriveResult:
 
 
 def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
-          recover: bool = True, video: Path | None = None, max_steps: int | None = None,
+          recover: bool = True, video: Path | None = None, camera_video: Path | None = None,
+          max_steps: int | None = None,
           label: str = "", progress: bool = False, env: TfaldaTrackEnv | None = None
           ) -> DriveResult:
-    """Drive ``laps`` laps of ``track`` from its start line at ``speed_m_s``."""
+    """Drive ``laps`` laps of ``track`` from its start line at ``speed_m_s``. ``video``
+    records the visualiser (lanes, ROIs, map), ``camera_video`` the bare grey camera
+    frames (for ``tfalda-sim replay``)."""
     if laps < 1:
         raise ValueError(f"laps must be ≥ 1, got {laps}")
     if not track.closed:
@@ -126,6 +129,7 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
     ended = "steps"
     t0 = time.perf_counter()
     writer = VideoWriter(video, FRAME_RATE_HZ) if video else None
+    camera_writer = VideoWriter(camera_video, FRAME_RATE_HZ) if camera_video else None
     bar = tqdm(total=laps, desc=label or "laps", disable=not progress, unit="lap")
     try:
         while steps < steps_budget:
@@ -133,6 +137,8 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
             steps += 1
             if writer is not None:
                 writer.write(env.render()[..., ::-1])
+            if camera_writer is not None:
+                camera_writer.write(env.camera_frame())
             errors.append(info["cross_track_m"])
             hits.append(info["detector_hit_rate"])
             resets += info["lis_reset"]
@@ -155,8 +161,9 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
                 agent.reset()
     finally:
         bar.close()
-        if writer is not None:
-            writer.close(keep=True)
+        for w in (writer, camera_writer):
+            if w is not None:
+                w.close(keep=True)
     errs = np.abs(np.array(errors)) if errors else np.zeros(1)
     return DriveResult(
         track=label or track.name or "", laps_completed=len(lap_times), lap_times_s=lap_times,

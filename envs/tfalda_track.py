@@ -480,13 +480,12 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         }
 
     # ------------------------------------------------------------------ render
-    def render(self) -> np.ndarray | None:
-        if self.render_mode is None:
-            gym.logger.warn("render() without a render_mode; create the env with "
-                            "render_mode='rgb_array'")
-            return None
+    def camera_frame(self) -> np.ndarray:
+        """The camera's full grey frame of the last observation, (480, 752) uint8, faults
+        included — what the detector saw (in "lanes" mode, where only the ROIs are
+        rendered, the full frame is rendered here with the same noise)."""
         if self._world is None:
-            raise RuntimeError("call reset() before render()")
+            raise RuntimeError("call reset() before camera_frame()")
         frame = self._last_frame
         if frame is None:
             frame = self.renderer.render(self._scene, self._camera_at,  # type: ignore[arg-type]
@@ -494,6 +493,17 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
                                          frame_seed=self._noise_seed + self._step_count)
             apply_image_faults([frame], [(0, 0, frame.shape[1], frame.shape[0])],
                                self._image_faults())
+            self._last_frame = frame
+        return frame
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode is None:
+            gym.logger.warn("render() without a render_mode; create the env with "
+                            "render_mode='rgb_array'")
+            return None
+        if self._world is None:
+            raise RuntimeError("call reset() before render()")
+        frame = self.camera_frame()
         pos = self._position
         text = (f"{self._track_label}  lap {self._laps()}  e_y {pos.cross_track_m:+.3f} m  "
                 f"v {self._world.speed_m_s:.2f} m/s")

@@ -30,6 +30,7 @@ from tracks.preview import write_preview
 from tracks.rules import MAT_EDGE_MARGIN_M, Violation, validate
 
 from .evaluation.command import add_compare_parser, add_evaluate_parser
+from .replay import add_replay_parser
 
 
 def track_summary(track: Track, violations: list[Violation]) -> dict[str, Any]:
@@ -262,6 +263,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_drive_parser(sub)
     add_train_parser(sub)
     add_stress_parser(sub)
+    add_replay_parser(sub)
     return parser
 
 

@@ -20,8 +20,9 @@ def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:
 def test_drive_reports_laps_as_json_and_writes_a_video(tmp_path: Path,
                                                        capsys: pytest.CaptureFixture[str]) -> None:
     video = tmp_path / "drive.mp4"
+    camera = tmp_path / "camera.mp4"
     code, out, _ = run(capsys, "drive", "--track", "oval", "--laps", "1", "--video", str(video),
-                       "--json")
+                       "--camera-video", str(camera), "--json")
     assert code == 0
     summary = json.loads(out)
     assert summary["laps_completed"] == 1 and len(summary["lap_times_s"]) == 1
@@ -29,6 +30,12 @@ def test_drive_reports_laps_as_json_and_writes_a_video(tmp_path: Path,
         assert key in summary
     cap = cv2.VideoCapture(str(video))
     assert cap.isOpened() and cap.get(cv2.CAP_PROP_FRAME_COUNT) == summary["steps"]
+    # The camera video holds the bare grey frames, for the replay.
+    from tfalda_sim.video import VideoReader
+
+    reader = VideoReader(camera)
+    assert reader.info.frame_count == summary["steps"] and not reader.info.colour
+    assert summary["camera_video"] == str(camera)
     # An existing video is not overwritten without --force.
     code, _, err = run(capsys, "drive", "--track", "oval", "--video", str(video))
     assert code == 2 and "--force" in err

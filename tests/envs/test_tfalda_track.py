@@ -214,6 +214,25 @@ def test_marking_gap_is_rendered_but_not_scored_away(oval_env: TfaldaTrackEnv) -
     assert info["cross_track_m"] == pytest.approx(0.0, abs=1e-9)  # the real track
 
 
+def test_camera_frame_is_what_the_detector_saw_in_every_mode() -> None:
+    frames = {}
+    for mode in ("lanes", "image"):
+        env = TfaldaTrackEnv(track="oval", observation=mode)
+        with pytest.raises(RuntimeError, match="reset"):
+            env.camera_frame()
+        obs, _ = env.reset(seed=3, options={"faults": [Blackout(step=5)]})
+        for _ in range(4):
+            obs, *_ = env.step(np.full(1, 0.2, np.float32))
+        frames[mode] = env.camera_frame()
+        assert frames[mode].shape == (480, 752) and frames[mode].dtype == np.uint8
+        if mode == "image":
+            assert np.array_equal(frames[mode], obs[..., 0])
+        env.step(np.zeros(1, np.float32))  # the blackout frame: faults are in it
+        assert env.camera_frame().max() < 10
+    # The ROI-only render of "lanes" mode and the full frame are the same pixels.
+    assert np.array_equal(frames["lanes"], frames["image"])
+
+
 def test_render_shows_the_frame_with_rois_and_the_inset(oval_env: TfaldaTrackEnv) -> None:
     oval_env.reset(seed=0)
     oval_env.step(np.zeros(1, np.float32))

@@ -1,0 +1,188 @@
+"""Reading recordings back (VideoReader) and the endless-loop replay (tfalda-sim replay)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from tfalda_sim import replay as replay_module
+from tfalda_sim.cli import main
+from tfalda_sim.perception import HoughDetector
+from tfalda_sim.replay import Detector, replay
+from tfalda_sim.video import VideoError, VideoReader, VideoWriter
+
+FRAMES = 6
+
+
+def _road(k: int, size: tuple[int, int] = (752, 480), colour: bool = False) -> np.ndarray:
+    """A dark frame with two bright lane lines in perspective (moving a little with k)."""
+    w, h = size
+    img = np.full((h, w, 3) if colour else (h, w), 35, np.uint8)
+    white = (250, 240, 255) if colour else 250
+    sx, sy = w / 752, h / 480
+    for x_top, x_bottom in ((330 + k, 60 + k), (430 + k, 700 + k)):
+        cv2.line(img, (int(x_top * sx), int(250 * sy)), (int(x_bottom * sx), int(470 * sy)),
+                 white, max(2, int(14 * sx)))
+    return img
+
+
+def _write(path: Path, n: int = FRAMES, **kw) -> Path:
+    with VideoWriter(path, 25.0) as writer:
+        for k in range(n):
+            writer.write(_road(k, **kw))
+    return path
+
+
+@pytest.fixture
+def video(tmp_path: Path) -> Path:
+    return _write(tmp_path / "drive.mp4")
+
+
+def test_the_reader_gives_grey_camera_frames_in_order(video: Path) -> None:
+    reader = VideoReader(video)
+    frames = list(reader.frames())
+    assert len(frames) == FRAMES and reader.conversions == []
+    assert all(f.shape == (480, 752) and f.dtype == np.uint8 for f in frames)
+    assert reader.info.fps == pytest.approx(25.0) and not reader.info.colour
+    # The lines move right by a pixel a frame: the frames come back in order.
+    cols = [int(np.argmax(f[465, 400:] > 150)) for f in frames]
+    assert cols == sorted(cols) and cols[-1] > cols[0]
+
+
+def test_the_loop_reads_the_file_again_after_its_last_frame(video: Path) -> None:
+    reader = VideoReader(video)
+    got = list(reader.loop(3))
+    assert [loop for loop, _ in got] == [0] * FRAMES + [1] * FRAMES + [2] * FRAMES
+    assert np.array_equal(got[0][1], got[FRAMES][1])
+    with pytest.raises(ValueError, match="loops"):
+        next(reader.loop(0))
+
+
+def test_colour_and_other_sizes_are_converted(tmp_path: Path) -> None:
+    path = _write(tmp_path / "small.mp4", size=(376, 240), colour=True)
+    reader = VideoReader(path)
+    assert reader.info.colour and (reader.info.width_px, reader.info.height_px) == (376, 240)
+    assert reader.conversions == ["colour → grey", "376×240 → 752×480 px"]
+    frame = next(reader.frames())
+    assert frame.shape == (480, 752) and frame.ndim == 2
+    result = replay(path, Detector.HOUGH, loops=1)
+    assert result["frames"] == FRAMES and result["detections_per_frame"] >= 2
+    assert result["conversions"] == reader.conversions
+    wide = VideoReader(_write(tmp_path / "wide.mp4", size=(640, 240)))
+    assert "aspect ratio changed" in wide.conversions
+
+
+def test_unreadable_files_get_a_clear_error(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError, match="no video file"):
+        VideoReader(tmp_path / "missing.mp4")
+    with pytest.raises(VideoError, match="not a file"):
+        VideoReader(tmp_path)
+    text = tmp_path / "notes.mp4"
+    text.write_text("not a video")
+    with pytest.raises(VideoError, match=r"not a video.*re-encode"):
+        VideoReader(text)
+    # A real AVI whose codec no decoder knows (its FOURCC rewritten).
+    avi = tmp_path / "mj.avi"
+    writer = cv2.VideoWriter(str(avi), cv2.VideoWriter_fourcc(*"MJPG"), 25, (64, 48))
+    for _ in range(3):
+        writer.write(np.full((48, 64, 3), 90, np.uint8))
+    writer.release()
+    unknown = tmp_path / "unknown.avi"
+    unknown.write_bytes(avi.read_bytes().replace(b"MJPG", b"QQQQ"))
+    with pytest.raises(VideoError, match="codec"):
+        VideoReader(unknown)
+    cut = tmp_path / "cut.mp4"
+    cut.write_bytes(_write(tmp_path / "whole.mp4").read_bytes()[:2000])
+    with pytest.raises(VideoError, match="re-encode"):
+        VideoReader(cut)
+
+
+@pytest.mark.parametrize("detector", list(Detector))
+def test_replay_runs_n_loops_and_annotates(video: Path, tmp_path: Path,
+                                           detector: Detector) -> None:
+    out = tmp_path / "annotated.mp4"
+    result = replay(video, detector, loops=3, out=out)
+    assert result["frames"] == 3 * FRAMES and result["loops_completed"] == 3
+    assert result["stopped"] == "loops" and result["detector_ms_median"] > 0
+    assert result["detections_per_frame"] >= 2
+    annotated = list(VideoReader(out).frames())
+    assert len(annotated) == 3 * FRAMES
+    if detector is Detector.HOUGH:  # the red segments drawn on the grey frame
+        bgr = next(iter(cv2.VideoCapture(str(out)).read()[1:]))
+        assert (bgr[..., 2].astype(int) - bgr[..., 1] > 100).sum() > 100
+
+
+def test_ctrl_c_stops_cleanly_and_keeps_the_annotated_video(
+        video: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    calls = {"n": 0}
+    real = HoughDetector.detect
+
+    def interrupted(self, frame):
+        calls["n"] += 1
+        if calls["n"] == 2 * FRAMES + 3:
+            raise KeyboardInterrupt
+        return real(self, frame)
+
+    monkeypatch.setattr(HoughDetector, "detect", interrupted)
+    out = tmp_path / "partial.mp4"
+    result = replay(video, Detector.HOUGH, loops=None, out=out)
+    assert result["stopped"] == "interrupted"
+    assert result["frames"] == 2 * FRAMES + 2 and result["loops_completed"] == 2
+    assert len(list(VideoReader(out).frames())) == 2 * FRAMES + 2
+
+
+def test_forever_stops_on_sigint_from_the_command_line(video: Path) -> None:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    proc = subprocess.Popen([sys.executable, "-m", "tfalda_sim", "replay", str(video),
+                             "--detector", "hough", "--forever"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+    try:
+        # Wait until frames are flowing (the progress bar counts them on stderr).
+        deadline = time.monotonic() + 120
+        seen = b""
+        while b"frame" not in seen and time.monotonic() < deadline:
+            seen += os.read(proc.stderr.fileno(), 256)
+        assert b"frame" in seen
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, out
+    assert b"(interrupted)" in out
+
+
+def test_replay_cli_json_and_bad_options(video: Path, tmp_path: Path, capsys) -> None:
+    assert main(["replay", str(video), "--detector", "hough", "--loops", "2", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["frames"] == 2 * FRAMES and out["hough_preset"] == "simulator"
+    assert main(["replay", str(tmp_path / "none.mp4"), "--detector", "tfalda"]) == 2
+    assert "no video file" in capsys.readouterr().err
+    assert main(["replay", str(video), "--detector", "hough", "--out", str(video),
+                 "--force"]) == 2
+    assert "being replayed" in capsys.readouterr().err
+    existing = tmp_path / "old.mp4"
+    existing.write_bytes(b"keep me")
+    assert main(["replay", str(video), "--detector", "hough", "--out", str(existing)]) == 2
+    assert existing.read_bytes() == b"keep me"
+    for bad in (["--loops", "0"], ["--loops", "2", "--forever"], ["--detector", "canny"]):
+        args = ["replay", str(video), *(["--detector", "hough"] if "--detector" not in bad
+                                         else []), *bad]
+        with pytest.raises(SystemExit):
+            main(args)
+
+
+def test_the_seed_preset_is_the_seeds_numbers(video: Path) -> None:
+    seed = replay(video, Detector.HOUGH, hough=replay_module.HoughPreset.SEED)
+    assert seed["hough_preset"] == "seed" and seed["frames"] == FRAMES
+    # The synthetic lines are 250 DN: bright enough for the seed's 0.9 threshold too.
+    assert seed["detections_per_frame"] >= 2

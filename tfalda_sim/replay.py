@@ -1,0 +1,193 @@
+"""Replay a recorded drive in an endless loop through a lane detector (the second seed's
+set-up: "Lesen Sie diesen als Endlosschleife ein").
+
+    tfalda-sim replay VIDEO --detector hough|tfalda [--loops N | --forever]
+                            [--out annotated.mp4] [--json]
+
+The video is read frame by frame (``video.VideoReader``: colour → grey, other sizes
+resized to the camera's 752×480), each frame goes through the detector, and after the last
+frame the file is read again from its start — ``--loops`` times, or until Ctrl-C with
+``--forever``. A Ctrl-C ends the replay cleanly in either mode: the frames so far are
+counted, the annotated video so far is kept, the summary printed.
+
+TFALDA + LIS keeps its state across the loop's seam (a recorded lap is a closed loop; the
+LIS resets if the seam does not fit); the Hough baseline has no state between frames.
+"""
+
+from __future__ import annotations
+
+import argparse
+import enum
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from .cli_common import CliError, check_outputs, positive_int_arg
+from .perception import DetectorConfig, HoughConfig, HoughDetector, TfaldaDetector
+from .perception.params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX
+from .rendering.overlay import draw_observation, to_bgr
+from .video import VideoError, VideoReader, VideoWriter
+
+SEGMENT_BGR: tuple[int, int, int] = (0, 0, 255)
+"""Hough segments in the annotated video (red, as the seed plots them)."""
+
+
+class Detector(enum.Enum):
+    """The detectors ``replay`` runs."""
+
+    HOUGH = "hough"
+    TFALDA = "tfalda"
+
+
+class HoughPreset(enum.Enum):
+    """The Hough baseline's settings: the seed's numbers, or the simulator preset
+    (``HoughConfig.simulator``: our markings' grey level, our car's bonnet as the mask)."""
+
+    SEED = "seed"
+    SIMULATOR = "simulator"
+
+    def config(self) -> HoughConfig:
+        return HoughConfig() if self is HoughPreset.SEED else HoughConfig.simulator()
+
+
+def _frame_step(detector: Detector, hough: HoughDetector | None,
+                tfalda: TfaldaDetector | None, frame: np.ndarray,
+                annotate: bool, text: str) -> tuple[int, bool, np.ndarray | None]:
+    """Run the detector on one frame: (detections, LIS reset, annotated frame or None)."""
+    if detector is Detector.HOUGH:
+        assert hough is not None
+        segments = hough.detect(frame).segments
+        picture = None
+        if annotate:
+            picture = to_bgr(frame)
+            for x1, y1, x2, y2 in np.rint(segments).astype(np.int64):
+                cv2.line(picture, (int(x1), int(y1)), (int(x2), int(y2)), SEGMENT_BGR, 2,
+                         cv2.LINE_AA)
+            cv2.putText(picture, f"{text} hough: {len(segments)} segments", (8, 20),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 220, 255), 1, cv2.LINE_AA)
+        return len(segments), False, picture
+    assert tfalda is not None
+    obs = tfalda.process(frame)
+    lanes = int(np.all(np.isfinite(obs.lanes), axis=1).sum())
+    picture = draw_observation(frame, obs, text=text) if annotate else None
+    return lanes, bool(obs.reset), picture
+
+
+def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
+           out: Path | None = None, hough: HoughPreset = HoughPreset.SIMULATOR,
+           progress: bool = False) -> dict[str, Any]:
+    """Replay ``path`` ``loops`` times (``None``: until Ctrl-C) through ``detector``;
+    the summary: frames, loops, frames/s, detector ms/frame, detections, conversions, and
+    how it stopped (``"loops"`` or ``"interrupted"``)."""
+    reader = VideoReader(path, size=(IMAGE_WIDTH_PX, IMAGE_HEIGHT_PX))
+    hough_det = HoughDetector(hough.config()) if detector is Detector.HOUGH else None
+    tfalda_det = TfaldaDetector(DetectorConfig.thesis()) if detector is Detector.TFALDA \
+        else None
+    writer = VideoWriter(out, reader.info.fps or 25.0) if out is not None else None
+    per_loop = reader.info.frame_count or None
+    bar = tqdm(total=loops * per_loop if loops and per_loop else None, unit="frame",
+               desc=f"replay {detector.value}", disable=not progress)
+    detections: list[int] = []
+    times: list[float] = []
+    resets = 0
+    loops_done = 0
+    stopped = "loops"
+    t_start = time.perf_counter()
+    try:
+        for loop, frame in reader.loop(loops):
+            if loop > loops_done:
+                loops_done = loop
+            t0 = time.perf_counter()
+            found, reset, picture = _frame_step(
+                detector, hough_det, tfalda_det, frame, writer is not None,
+                f"loop {loop + 1} frame {len(detections) + 1}")
+            times.append(time.perf_counter() - t0)
+            detections.append(found)
+            resets += reset
+            if writer is not None and picture is not None:
+                writer.write(picture)
+            bar.update()
+        loops_done = loops if loops is not None else loops_done
+    except KeyboardInterrupt:
+        stopped = "interrupted"
+    finally:
+        bar.close()
+        if writer is not None:
+            writer.close(keep=True)  # an interrupted replay keeps what it annotated
+    wall = time.perf_counter() - t_start
+    d = np.array(detections, dtype=np.float64)
+    t = np.array(times) * 1e3
+    return {
+        "video": str(path), "detector": detector.value,
+        "hough_preset": hough.value if detector is Detector.HOUGH else None,
+        "codec": reader.info.codec, "source_size_px": [reader.info.width_px,
+                                                      reader.info.height_px],
+        "conversions": reader.conversions,
+        "frames": len(detections), "loops_completed": loops_done, "stopped": stopped,
+        "frames_per_s": len(detections) / wall if wall > 0 else None,
+        "detector_ms_median": float(np.median(t)) if len(t) else None,
+        "detections_per_frame": float(d.mean()) if len(d) else None,
+        "frames_without_detection": int((d == 0).sum()),
+        "lis_resets": resets if detector is Detector.TFALDA else None,
+        "out": str(out) if out is not None and writer is not None and writer.frames else None,
+    }
+
+
+# --------------------------------------------------------------------------- CLI
+def add_replay_parser(sub: Any) -> None:
+    rp = sub.add_parser(
+        "replay", help="replay a recorded video in a loop through a lane detector",
+        description="Read VIDEO in an endless loop (the second seed's set-up), run the Hough "
+                    "baseline or TFALDA + LIS on every frame, report frames/s and detections. "
+                    "Colour and other frame sizes are converted to the camera's grey "
+                    "752×480. Ctrl-C stops cleanly.")
+    rp.add_argument("video", type=Path, help="the recording (e.g. from tfalda-sim drive --video)")
+    rp.add_argument("--detector", choices=[d.value for d in Detector], required=True,
+                    help="the lane detector")
+    times = rp.add_mutually_exclusive_group()
+    times.add_argument("--loops", type=positive_int_arg, default=1,
+                       help="passes over the video (default 1)")
+    times.add_argument("--forever", action="store_true", help="loop until Ctrl-C")
+    rp.add_argument("--hough-preset", choices=[p.value for p in HoughPreset],
+                    default=HoughPreset.SIMULATOR.value,
+                    help="Hough settings: the seed's numbers or the simulator preset "
+                         "(default; the seed's 0.9 threshold finds no rendered marking)")
+    rp.add_argument("--out", type=Path, help="annotated MP4 (segments or ROIs and lanes)")
+    rp.add_argument("--force", action="store_true", help="overwrite an existing --out")
+    rp.add_argument("--json", action="store_true", help="print one JSON object")
+    rp.set_defaults(func=cmd_replay)
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    check_outputs({"out": args.out}, {"out": ".mp4"}, args.force)
+    if args.out is not None and args.out.resolve() == args.video.resolve():
+        raise CliError("--out names the video being replayed; give another file")
+    try:
+        result = replay(args.video, Detector(args.detector),
+                        loops=None if args.forever else args.loops, out=args.out,
+                        hough=HoughPreset(args.hough_preset),
+                        progress=sys.stderr.isatty() or not args.json)
+    except (FileNotFoundError, VideoError) as exc:
+        raise CliError(str(exc)) from None
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    print(f"{result['video']}: {result['frames']} frames, {result['loops_completed']} loops "
+          f"({result['stopped']}), {result['frames_per_s'] or 0:.0f} frames/s, detector "
+          f"{result['detector_ms_median'] or 0:.2f} ms/frame")
+    what = "segments" if args.detector == Detector.HOUGH.value else "lanes"
+    print(f"{args.detector}: {result['detections_per_frame'] or 0:.2f} {what}/frame, "
+          f"{result['frames_without_detection']} frames without any"
+          + (f", {result['lis_resets']} LIS resets" if result["lis_resets"] is not None
+             else ""))
+    if result["conversions"]:
+        print("converted: " + ", ".join(result["conversions"]))
+    if result["out"]:
+        print(f"wrote {result['out']}")
+    return 0
