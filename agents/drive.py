@@ -9,6 +9,7 @@ policy (the ``rl`` extra).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 from dataclasses import asdict, dataclass, field
@@ -115,6 +116,8 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
         raise ValueError(f"laps must be ≥ 1, got {laps}")
     if not track.closed:
         raise ValueError(f"{track.name or 'the track'} is not a loop: laps need a closed track")
+    if video and camera_video and Path(video).resolve() == Path(camera_video).resolve():
+        raise ValueError("video and camera_video name the same file; give each its own")
     env = env or TfaldaTrackEnv(track=track, speed_m_s=speed_m_s,
                                 render_mode="rgb_array" if video else None)
     lane = -0.5 * track.lane_width_m
@@ -128,10 +131,13 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
     departures = resets = steps = 0
     ended = "steps"
     t0 = time.perf_counter()
-    writer = VideoWriter(video, FRAME_RATE_HZ) if video else None
-    camera_writer = VideoWriter(camera_video, FRAME_RATE_HZ) if camera_video else None
-    bar = tqdm(total=laps, desc=label or "laps", disable=not progress, unit="lap")
-    try:
+    # The writers replace an existing file only when the drive ends without an error.
+    with contextlib.ExitStack() as stack:
+        writer = stack.enter_context(VideoWriter(video, FRAME_RATE_HZ)) if video else None
+        camera_writer = (stack.enter_context(VideoWriter(camera_video, FRAME_RATE_HZ))
+                         if camera_video else None)
+        bar = stack.enter_context(tqdm(total=laps, desc=label or "laps",
+                                       disable=not progress, unit="lap"))
         while steps < steps_budget:
             obs, _, terminated, _, info = env.step(agent.act(obs))
             steps += 1
@@ -159,11 +165,6 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
                 obs, _ = env.reset(options={"track": track, "speed_m_s": speed_m_s,
                                             "start": (info["s_m"], lane, 0.0)})
                 agent.reset()
-    finally:
-        bar.close()
-        for w in (writer, camera_writer):
-            if w is not None:
-                w.close(keep=True)
     errs = np.abs(np.array(errors)) if errors else np.zeros(1)
     return DriveResult(
         track=label or track.name or "", laps_completed=len(lap_times), lap_times_s=lap_times,

@@ -15,7 +15,8 @@ the frames of an LIS reset, are not believed. The car steers along the model:
 - P: the lateral offset, ``x_c`` (0.5 m) ahead of the rear axle, of the lane centre's
   *tangent* at the axle (left positive) — not of the lane itself, which in a curve of
   curvature κ lies κ·x_c²/2 aside even for a car on the centre line: controlling that
-  point held the car κ·(x_c²/2 + K_d·x_c/K_p) off centre, 11 cm in a 2 m curve;
+  point holds the car up to κ·(x_c²/2 + K_d·x_c/K_p) off centre (14 cm in a 2 m curve;
+  the integrator took some back: 11–12 cm measured);
 - D: the lane direction at the axle (the offset's rate is ``v sin ψ0``: its measured
   derivative, no differencing of noisy offsets);
 - I: removes the steady offset the servo's lag leaves when a curve begins.

@@ -481,9 +481,9 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
 
     # ------------------------------------------------------------------ render
     def camera_frame(self) -> np.ndarray:
-        """The camera's full grey frame of the last observation, (480, 752) uint8, faults
-        included — what the detector saw (in "lanes" mode, where only the ROIs are
-        rendered, the full frame is rendered here with the same noise)."""
+        """A copy of the camera's full grey frame of the last observation, (480, 752)
+        uint8, faults included — what the detector saw (in "lanes" mode, where only the
+        ROIs are rendered, the full frame is rendered here with the same noise)."""
         if self._world is None:
             raise RuntimeError("call reset() before camera_frame()")
         frame = self._last_frame
@@ -494,7 +494,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             apply_image_faults([frame], [(0, 0, frame.shape[1], frame.shape[0])],
                                self._image_faults())
             self._last_frame = frame
-        return frame
+        return frame.copy()
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:

@@ -12,6 +12,8 @@ counted, the annotated video so far is kept, the summary printed.
 
 TFALDA + LIS keeps its state across the loop's seam (a recorded lap is a closed loop; the
 LIS resets if the seam does not fit); the Hough baseline has no state between frames.
+The command exits 0 after ``--loops N`` or a Ctrl-C of ``--forever``, 130 when a Ctrl-C
+cut ``--loops N`` short, 2 for an unreadable video or a bad option.
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ from __future__ import annotations
 import argparse
 import enum
 import json
+import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -34,6 +38,8 @@ from .perception.params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX
 from .rendering.overlay import draw_observation, to_bgr
 from .video import VideoError, VideoReader, VideoWriter
 
+DEFAULT_FPS: float = 25.0
+"""Frame rate of the annotated video when the recording declares none [1/s]."""
 SEGMENT_BGR: tuple[int, int, int] = (0, 0, 255)
 """Hough segments in the annotated video (red, as the seed plots them)."""
 
@@ -74,7 +80,9 @@ def _frame_step(detector: Detector, hough: HoughDetector | None,
         return len(segments), False, picture
     assert tfalda is not None
     obs = tfalda.process(frame)
-    lanes = int(np.all(np.isfinite(obs.lanes), axis=1).sum())
+    # TFALDA always returns a lane per ROI; a detection is one the LIS did not replace by
+    # last frame's.
+    lanes = int((np.all(np.isfinite(obs.lanes), axis=1) & ~obs.replaced).sum())
     picture = draw_observation(frame, obs, text=text) if annotate else None
     return lanes, bool(obs.reset), picture
 
@@ -89,20 +97,23 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
     hough_det = HoughDetector(hough.config()) if detector is Detector.HOUGH else None
     tfalda_det = TfaldaDetector(DetectorConfig.thesis()) if detector is Detector.TFALDA \
         else None
-    writer = VideoWriter(out, reader.info.fps or 25.0) if out is not None else None
+    fps = reader.info.fps if math.isfinite(reader.info.fps) and reader.info.fps > 0 else \
+        DEFAULT_FPS
     per_loop = reader.info.frame_count or None
-    bar = tqdm(total=loops * per_loop if loops and per_loop else None, unit="frame",
-               desc=f"replay {detector.value}", disable=not progress)
     detections: list[int] = []
     times: list[float] = []
     resets = 0
-    loops_done = 0
     stopped = "loops"
     t_start = time.perf_counter()
+    writer: VideoWriter | None = None
+    bar = None
+    keep = False  # the annotated video replaces --out only after a clean stop
     try:
+        if out is not None:
+            writer = VideoWriter(out, fps)
+        bar = tqdm(total=loops * per_loop if loops and per_loop else None, unit="frame",
+                   desc=f"replay {detector.value}", disable=not progress)
         for loop, frame in reader.loop(loops):
-            if loop > loops_done:
-                loops_done = loop
             t0 = time.perf_counter()
             found, reset, picture = _frame_step(
                 detector, hough_det, tfalda_det, frame, writer is not None,
@@ -113,13 +124,15 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
             if writer is not None and picture is not None:
                 writer.write(picture)
             bar.update()
-        loops_done = loops if loops is not None else loops_done
+        keep = True
     except KeyboardInterrupt:
         stopped = "interrupted"
+        keep = True
     finally:
-        bar.close()
+        if bar is not None:
+            bar.close()
         if writer is not None:
-            writer.close(keep=True)  # an interrupted replay keeps what it annotated
+            writer.close(keep=keep)
     wall = time.perf_counter() - t_start
     d = np.array(detections, dtype=np.float64)
     t = np.array(times) * 1e3
@@ -129,13 +142,14 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
         "codec": reader.info.codec, "source_size_px": [reader.info.width_px,
                                                       reader.info.height_px],
         "conversions": reader.conversions,
-        "frames": len(detections), "loops_completed": loops_done, "stopped": stopped,
+        "frames": len(detections), "loops_completed": reader.passes_completed,
+        "stopped": stopped,
         "frames_per_s": len(detections) / wall if wall > 0 else None,
         "detector_ms_median": float(np.median(t)) if len(t) else None,
         "detections_per_frame": float(d.mean()) if len(d) else None,
         "frames_without_detection": int((d == 0).sum()),
         "lis_resets": resets if detector is Detector.TFALDA else None,
-        "out": str(out) if out is not None and writer is not None and writer.frames else None,
+        "out": str(out) if writer is not None and writer.frames else None,
     }
 
 
@@ -165,9 +179,10 @@ def add_replay_parser(sub: Any) -> None:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    check_outputs({"out": args.out}, {"out": ".mp4"}, args.force)
-    if args.out is not None and args.out.resolve() == args.video.resolve():
+    if args.out is not None and args.out.exists() and args.video.exists() and \
+            os.path.samefile(args.out, args.video):
         raise CliError("--out names the video being replayed; give another file")
+    check_outputs({"out": args.out}, {"out": ".mp4"}, args.force)
     try:
         result = replay(args.video, Detector(args.detector),
                         loops=None if args.forever else args.loops, out=args.out,
@@ -175,9 +190,13 @@ def cmd_replay(args: argparse.Namespace) -> int:
                         progress=sys.stderr.isatty() or not args.json)
     except (FileNotFoundError, VideoError) as exc:
         raise CliError(str(exc)) from None
+    except OSError as exc:
+        raise CliError(f"cannot write {args.out}: {exc}") from None
+    # An interrupted --loops N did not finish what was asked; --forever ends that way.
+    code = 130 if result["stopped"] == "interrupted" and not args.forever else 0
     if args.json:
         print(json.dumps(result))
-        return 0
+        return code
     print(f"{result['video']}: {result['frames']} frames, {result['loops_completed']} loops "
           f"({result['stopped']}), {result['frames_per_s'] or 0:.0f} frames/s, detector "
           f"{result['detector_ms_median'] or 0:.2f} ms/frame")
@@ -190,4 +209,4 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print("converted: " + ", ".join(result["conversions"]))
     if result["out"]:
         print(f"wrote {result['out']}")
-    return 0
+    return code

@@ -104,7 +104,7 @@ class VideoInfo:
     codec: str
     """FOURCC of the video stream, e.g. ``mp4v``."""
     colour: bool
-    """The decoded frames have three or four channels."""
+    """The first frame has three or four channels that differ (judged on that frame)."""
 
 
 class VideoReader:
@@ -141,6 +141,7 @@ class VideoReader:
                 and not _is_grey(first))
         finally:
             cap.release()
+        self.passes_completed = 0
         self.conversions: list[str] = []
         if self.info.colour:
             self.conversions.append("colour → grey")
@@ -185,18 +186,19 @@ class VideoReader:
 
     def loop(self, loops: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
         """``(loop, frame)`` over ``loops`` passes (``None``: endlessly), the file read
-        again from its start after its last frame."""
+        again from its start after its last frame; ``passes_completed`` counts the passes
+        read to their end."""
         if loops is not None and loops < 1:
             raise ValueError(f"loops must be ≥ 1 or None (endless), got {loops}")
-        n = 0
-        while loops is None or n < loops:
+        self.passes_completed = 0
+        while loops is None or self.passes_completed < loops:
             empty = True
             for frame in self.frames():
                 empty = False
-                yield n, frame
+                yield self.passes_completed, frame
             if empty:
                 raise VideoError(f"{self.path}: a pass over the file gave no frame")
-            n += 1
+            self.passes_completed += 1
 
 
 GREY_TOLERANCE_DN: int = 3

@@ -215,8 +215,8 @@ def test_marking_gap_is_rendered_but_not_scored_away(oval_env: TfaldaTrackEnv) -
 
 
 def test_camera_frame_is_what_the_detector_saw_in_every_mode() -> None:
-    frames = {}
-    for mode in ("lanes", "image"):
+    frames, lanes = {}, {}
+    for mode in ("lanes", "dict"):
         env = TfaldaTrackEnv(track="oval", observation=mode)
         with pytest.raises(RuntimeError, match="reset"):
             env.camera_frame()
@@ -224,13 +224,19 @@ def test_camera_frame_is_what_the_detector_saw_in_every_mode() -> None:
         for _ in range(4):
             obs, *_ = env.step(np.full(1, 0.2, np.float32))
         frames[mode] = env.camera_frame()
+        lanes[mode] = obs["lanes"] if mode == "dict" else obs
         assert frames[mode].shape == (480, 752) and frames[mode].dtype == np.uint8
-        if mode == "image":
-            assert np.array_equal(frames[mode], obs[..., 0])
+        if mode == "dict":
+            assert np.array_equal(frames[mode], obs["image"][..., 0])
+            frames[mode][:] = 0  # a copy: the observation is not changed through it
+            assert obs["image"].max() > 0
+            frames[mode] = env.camera_frame()
         env.step(np.zeros(1, np.float32))  # the blackout frame: faults are in it
         assert env.camera_frame().max() < 10
-    # The ROI-only render of "lanes" mode and the full frame are the same pixels.
-    assert np.array_equal(frames["lanes"], frames["image"])
+    # "lanes" mode renders only the ROIs, the detector sees them: same lanes as from the
+    # full frame, and the full frame rendered afterwards is the same pixels.
+    assert np.array_equal(lanes["lanes"], lanes["dict"])
+    assert np.array_equal(frames["lanes"], frames["dict"])
 
 
 def test_render_shows_the_frame_with_rois_and_the_inset(oval_env: TfaldaTrackEnv) -> None:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import os
+import re
+import select
 import signal
 import subprocess
 import sys
@@ -106,14 +108,30 @@ def test_unreadable_files_get_a_clear_error(tmp_path: Path) -> None:
         VideoReader(cut)
 
 
+@pytest.fixture(scope="module")
+def camera_video(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Six camera frames of the simulator on the oval's straight (env.camera_frame)."""
+    from envs import TfaldaTrackEnv
+
+    env = TfaldaTrackEnv(track="oval")
+    env.reset(seed=0, options={"start": (0.5, -0.2, 0.0)})
+    path = tmp_path_factory.mktemp("camera") / "camera.mp4"
+    with VideoWriter(path, 50.0) as writer:
+        for _ in range(FRAMES):
+            env.step(np.zeros(1, np.float32))
+            writer.write(env.camera_frame())
+    return path
+
+
 @pytest.mark.parametrize("detector", list(Detector))
-def test_replay_runs_n_loops_and_annotates(video: Path, tmp_path: Path,
+def test_replay_runs_n_loops_and_annotates(camera_video: Path, tmp_path: Path,
                                            detector: Detector) -> None:
     out = tmp_path / "annotated.mp4"
-    result = replay(video, detector, loops=3, out=out)
+    result = replay(camera_video, detector, loops=3, out=out)
     assert result["frames"] == 3 * FRAMES and result["loops_completed"] == 3
     assert result["stopped"] == "loops" and result["detector_ms_median"] > 0
-    assert result["detections_per_frame"] >= 2
+    # Both lines of the ego lane (Hough: segments; TFALDA: lanes the LIS kept).
+    assert result["detections_per_frame"] >= (2 if detector is Detector.HOUGH else 3)
     annotated = list(VideoReader(out).frames())
     assert len(annotated) == 3 * FRAMES
     if detector is Detector.HOUGH:  # the red segments drawn on the grey frame
@@ -121,23 +139,56 @@ def test_replay_runs_n_loops_and_annotates(video: Path, tmp_path: Path,
         assert (bgr[..., 2].astype(int) - bgr[..., 1] > 100).sum() > 100
 
 
-def test_ctrl_c_stops_cleanly_and_keeps_the_annotated_video(
-        video: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def _interrupt_on_call(monkeypatch: pytest.MonkeyPatch, n: int,
+                       exc: type[BaseException] = KeyboardInterrupt) -> None:
+    """HoughDetector.detect raises ``exc`` on its n-th call."""
     calls = {"n": 0}
     real = HoughDetector.detect
 
-    def interrupted(self, frame):
+    def detect(self, frame):
         calls["n"] += 1
-        if calls["n"] == 2 * FRAMES + 3:
-            raise KeyboardInterrupt
+        if calls["n"] == n:
+            raise exc
         return real(self, frame)
 
-    monkeypatch.setattr(HoughDetector, "detect", interrupted)
+    monkeypatch.setattr(HoughDetector, "detect", detect)
+
+
+@pytest.mark.parametrize("at, frames, loops", [(2 * FRAMES + 3, 2 * FRAMES + 2, 2),
+                                               (2 * FRAMES + 1, 2 * FRAMES, 2),
+                                               (1, 0, 0)])
+def test_ctrl_c_stops_cleanly_and_keeps_the_annotated_video(
+        video: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        at: int, frames: int, loops: int) -> None:
+    _interrupt_on_call(monkeypatch, at)
     out = tmp_path / "partial.mp4"
     result = replay(video, Detector.HOUGH, loops=None, out=out)
     assert result["stopped"] == "interrupted"
-    assert result["frames"] == 2 * FRAMES + 2 and result["loops_completed"] == 2
-    assert len(list(VideoReader(out).frames())) == 2 * FRAMES + 2
+    assert result["frames"] == frames and result["loops_completed"] == loops
+    if frames:
+        assert len(list(VideoReader(out).frames())) == frames
+    else:
+        assert not out.exists() and list(tmp_path.glob(".partial*")) == []
+
+
+def test_an_error_mid_replay_leaves_an_existing_out_untouched(
+        video: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    out = tmp_path / "old.mp4"
+    out.write_bytes(b"the user's video")
+    _interrupt_on_call(monkeypatch, 4, RuntimeError)
+    with pytest.raises(RuntimeError):
+        replay(video, Detector.HOUGH, loops=2, out=out)
+    assert out.read_bytes() == b"the user's video"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["drive.mp4", "old.mp4"]
+
+
+def test_ctrl_c_exit_codes(video: Path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
+    _interrupt_on_call(monkeypatch, 3)
+    assert main(["replay", str(video), "--detector", "hough", "--loops", "3"]) == 130
+    assert "(interrupted)" in capsys.readouterr().out
+    _interrupt_on_call(monkeypatch, 3)
+    assert main(["replay", str(video), "--detector", "hough", "--forever", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["stopped"] == "interrupted"
 
 
 def test_forever_stops_on_sigint_from_the_command_line(video: Path) -> None:
@@ -146,19 +197,24 @@ def test_forever_stops_on_sigint_from_the_command_line(video: Path) -> None:
                              "--detector", "hough", "--forever"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
     try:
-        # Wait until frames are flowing (the progress bar counts them on stderr).
+        # Wait until frames flow: the progress bar on stderr counts one or more.
         deadline = time.monotonic() + 120
         seen = b""
-        while b"frame" not in seen and time.monotonic() < deadline:
-            seen += os.read(proc.stderr.fileno(), 256)
-        assert b"frame" in seen
-        time.sleep(0.5)
+        while not re.search(rb"[1-9]\d*frame", seen) and time.monotonic() < deadline:
+            ready, _, _ = select.select([proc.stderr], [], [], 1.0)
+            if ready:
+                chunk = os.read(proc.stderr.fileno(), 4096)
+                if not chunk:
+                    break  # the replay ended by itself: it must not
+                seen += chunk
+        assert re.search(rb"[1-9]\d*frame", seen), seen[-500:]
         proc.send_signal(signal.SIGINT)
         out, _ = proc.communicate(timeout=60)
     finally:
         proc.kill()
     assert proc.returncode == 0, out
-    assert b"(interrupted)" in out
+    frames = int(re.search(rb": (\d+) frames", out).group(1))
+    assert frames > 0 and b"(interrupted)" in out
 
 
 def test_replay_cli_json_and_bad_options(video: Path, tmp_path: Path, capsys) -> None:

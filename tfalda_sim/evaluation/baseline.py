@@ -7,13 +7,16 @@ line segments in image pixels:
 
 - **hit rate**: the thesis' black-box test (section 4.1.7, ``lane_hit_rates``): the share
   of a line's pixels within ε (5 px) of a painted longitudinal marking; per frame the mean
-  over the lines given, 0 for a frame without any line (the thesis scores a missing lane 0);
+  over the lines given, 0 for a frame without any line. It measures how much of what a
+  detector reports lies on markings (a precision): TFALDA always reports its four lanes,
+  Hough up to five segments, however many it finds — one good segment scores 1;
 - **false positive**: a line with less than half of it on a marking
-  (``LANE_FAILURE_HIT_RATE``) — a line where there is none;
-- **ego lines found**: the share of frames in which the car's own lane boundaries (left:
-  the centre line, right: the side line), where visible in the rows both detectors look
-  at, are found by some line: TuSimple's point accuracy of the line against the boundary
-  ≥ 0.85 over at least ``MIN_MATCH_ROWS`` rows;
+  (``LANE_FAILURE_HIT_RATE``) — a line where there is none (``tfalda-sim evaluate`` counts
+  its TuSimple false positives per ROI instead, which Hough has no ROIs for);
+- **ego lines found** (the recall): the share of frames in which the car's own lane
+  boundaries (left: the centre line, right: the side line), where visible in TFALDA's ROI
+  rows (``BAND_ROWS``, inside the Hough crop), are followed by some line: TuSimple's point
+  accuracy of the line against the boundary ≥ 0.85 over at least ``MIN_MATCH_ROWS`` rows;
 - **compute time**: wall-clock time of the detector alone per frame [ms] (TFALDA + LIS:
   the thesis pipeline on the full frame; Hough: the seed's steps), in the same process.
 
@@ -35,7 +38,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..perception import DetectorConfig, HoughConfig, HoughDetector, LaneObservation
-from ..perception.hough import CROP_HEIGHT_PX, CROP_TOP_PX
+from ..perception.params import INITIAL_ROIS
 from ..rendering import FrameTruth, Renderer
 from .metrics import (
     EPSILON_PX,
@@ -56,9 +59,11 @@ HOUGH_SIMULATOR = "Hough (simulator preset)"
 MIN_MATCH_ROWS: int = 10
 """A line finds an ego boundary only over at least this many image rows [px]."""
 
-BAND_ROWS: tuple[int, int] = (CROP_TOP_PX, CROP_TOP_PX + CROP_HEIGHT_PX)
-"""Image rows [first, stop) [px] in which an ego boundary counts as visible: the Hough
-crop (rows 219–477), which holds TFALDA's ROIs (rows 260–425) too."""
+BAND_ROWS: tuple[int, int] = (min(r[1] for r in INITIAL_ROIS),
+                              max(r[1] + r[3] for r in INITIAL_ROIS))
+"""Image rows [first, stop) [px] in which an ego boundary counts as visible: the rows of
+TFALDA's ROIs (260–425, table 2.4), which both detectors look at (the Hough crop is rows
+219–477, its simulator mask starts at 441)."""
 
 MIN_VISIBLE_ROWS: int = 20
 """An ego boundary is visible in a frame when it crosses at least this many rows of the

@@ -5,12 +5,15 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import os
 import sys
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from tracks.fileformat import atomic_write
 
 from ..cli_common import (
     CliError,
@@ -260,20 +263,29 @@ def cmd_compare(args: argparse.Namespace) -> int:
     seeds = range(0) if args.no_generated else args.seeds
     if not thesis and not len(seeds):
         raise CliError("--no-thesis and --no-generated leave nothing to compare")
-    if args.out is not None:
+    if args.out is not None:  # checked before minutes of work, not after
         if args.out.exists() and not args.out.is_dir():
             raise CliError(f"--out {args.out} is a file; give a directory")
         existing = [str(args.out / f) for f in COMPARE_FILES.values()
                     if (args.out / f).exists()]
         if existing and not args.force:
             raise CliError(f"{', '.join(existing)} exists; add --force to overwrite")
+        try:
+            args.out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise CliError(f"cannot create --out {args.out}: {exc.strerror}") from None
+        if not os.access(args.out, os.W_OK):
+            raise CliError(f"--out {args.out} is not writable; choose another directory")
     result = compare(thesis, seeds, max_frames=args.max_frames, workers=args.workers,
                      progress=sys.stderr.isatty() or not args.json)
     table = markdown_table(result)
     if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
-        (args.out / COMPARE_FILES["json"]).write_text(json.dumps(result, indent=1))
-        (args.out / COMPARE_FILES["md"]).write_text(table)
+        # Each file is written to a temporary name and moved into place: an interrupted
+        # or failed write leaves the previous report as it was.
+        with atomic_write(args.out / COMPARE_FILES["json"]) as fh:
+            fh.write(json.dumps(result, indent=1))
+        with atomic_write(args.out / COMPARE_FILES["md"]) as fh:
+            fh.write(table)
         plot(result, args.out / COMPARE_FILES["png"])
         result["out"] = {k: str(args.out / f) for k, f in COMPARE_FILES.items()}
     if args.json:

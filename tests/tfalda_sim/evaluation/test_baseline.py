@@ -55,7 +55,7 @@ def test_a_line_off_the_markings_is_a_false_positive_and_finds_nothing(straight_
     score = score_lines(middle[None], straight_truth)
     assert score.false_positive.all() and score.hit_rates[0] < 0.2
     assert score.ego_visible.all() and not score.ego_found.any()
-    # Missing lanes (NaN, as TFALDA reports them) are no lines at all.
+    # Rows with a non-finite value are no lines at all.
     empty = score_lines(np.full((4, 4), np.nan), straight_truth)
     assert len(empty.hit_rates) == 0 and empty.confidence == 0.0
 
