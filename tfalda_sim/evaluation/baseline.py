@@ -50,11 +50,13 @@ from .metrics import (
     truth_distance,
     tusimple_accuracy,
 )
-from .runner import WITH_LIS, WITHOUT_LIS, run_scenario
+from .runner import run_scenario
 from .scenarios import Scenario, ScenarioKind, generated_scenario, thesis_scenario
 
 HOUGH_SEED = "Hough (seed values)"
 HOUGH_SIMULATOR = "Hough (simulator preset)"
+TFALDA_LIS = "TFALDA + LIS"
+TFALDA_NO_LIS = "TFALDA without LIS"
 
 MIN_MATCH_ROWS: int = 10
 """A line finds an ego boundary only over at least this many image rows [px]."""
@@ -78,7 +80,7 @@ def hough_detectors() -> dict[str, HoughConfig]:
 
 def tfalda_detectors() -> dict[str, DetectorConfig]:
     """The TFALDA runs: the thesis' configuration with and without the LIS."""
-    return {WITH_LIS: DetectorConfig.thesis(), WITHOUT_LIS: DetectorConfig.without_lis()}
+    return {TFALDA_LIS: DetectorConfig.thesis(), TFALDA_NO_LIS: DetectorConfig.without_lis()}
 
 
 @dataclass(frozen=True)

@@ -11,12 +11,12 @@ import pytest
 from tfalda_sim.cli import main
 from tfalda_sim.evaluation.baseline import (
     HOUGH_SIMULATOR,
+    TFALDA_LIS,
     Tally,
     compare_scenario,
     markdown_table,
     score_lines,
 )
-from tfalda_sim.evaluation.runner import WITH_LIS
 from tfalda_sim.evaluation.scenarios import generated_scenario
 from tfalda_sim.rendering import Renderer, frame_truth
 from tracks import load_named
@@ -84,7 +84,7 @@ def test_every_detector_scores_the_same_frames() -> None:
     tallies = compare_scenario(generated_scenario(10000, max_frames=12))
     assert {t.frames for t in tallies.values()} == {12}
     assert all(len(t.times_s) == 12 and min(t.times_s) > 0 for t in tallies.values())
-    for label in (WITH_LIS, HOUGH_SIMULATOR):
+    for label in (TFALDA_LIS, HOUGH_SIMULATOR):
         s = tallies[label].summary()
         assert s["ego_right_found"] >= 0.8 and s["hit_rate"] > 0.8, (label, s)
 
@@ -95,7 +95,7 @@ def test_compare_cli_writes_json_markdown_and_plot(tmp_path: Path, capsys) -> No
     assert main(args) == 0
     out = json.loads(capsys.readouterr().out)
     runs = out["groups"]["generated"]
-    assert set(runs) >= {WITH_LIS, HOUGH_SIMULATOR} and runs[WITH_LIS]["frames"] == 6
+    assert set(runs) >= {TFALDA_LIS, HOUGH_SIMULATOR} and runs[TFALDA_LIS]["frames"] == 6
     saved = json.loads((tmp_path / "compare.json").read_text())
     assert saved["groups"] == out["groups"]
     assert (tmp_path / "compare.md").read_text() == markdown_table(saved)
