@@ -2,7 +2,7 @@
 set-up: "Lesen Sie diesen als Endlosschleife ein").
 
     tfalda-sim replay VIDEO --detector hough|tfalda [--loops N | --forever]
-                            [--out annotated.mp4] [--json]
+                            [--out annotated.mp4 [--stages]] [--json]
 
 The video is read frame by frame (``video.VideoReader``: colour → grey, other sizes
 resized to the camera's 752×480), each frame goes through the detector, and after the last
@@ -33,7 +33,13 @@ import numpy as np
 from tqdm import tqdm
 
 from .cli_common import CliError, check_outputs, positive_int_arg
-from .perception import DetectorConfig, HoughConfig, HoughDetector, TfaldaDetector
+from .perception import (
+    DetectorConfig,
+    HoughConfig,
+    HoughDetector,
+    TfaldaDetector,
+    stage_view,
+)
 from .perception.params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX
 from .rendering.overlay import draw_observation, to_bgr
 from .video import VideoError, VideoReader, VideoWriter
@@ -64,13 +70,18 @@ class HoughPreset(enum.Enum):
 
 def _frame_step(detector: Detector, hough: HoughDetector | None,
                 tfalda: TfaldaDetector | None, frame: np.ndarray,
-                annotate: bool, text: str) -> tuple[int, bool, np.ndarray | None]:
-    """Run the detector on one frame: (detections, LIS reset, annotated frame or None)."""
+                annotate: bool, text: str, stages: bool = False
+                ) -> tuple[int, bool, np.ndarray | None]:
+    """Run the detector on one frame: (detections, LIS reset, annotated frame or None;
+    with ``stages`` the Hough baseline's 2×2 stage view instead of the frame)."""
     if detector is Detector.HOUGH:
         assert hough is not None
-        segments = hough.detect(frame).segments
+        result = hough.detect(frame)
+        segments = result.segments
         picture = None
-        if annotate:
+        if annotate and stages:
+            picture = stage_view(result)
+        elif annotate:
             picture = to_bgr(frame)
             for x1, y1, x2, y2 in np.rint(segments).astype(np.int64):
                 cv2.line(picture, (int(x1), int(y1)), (int(x2), int(y2)), SEGMENT_BGR, 2,
@@ -89,10 +100,13 @@ def _frame_step(detector: Detector, hough: HoughDetector | None,
 
 def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
            out: Path | None = None, hough: HoughPreset = HoughPreset.SIMULATOR,
-           progress: bool = False) -> dict[str, Any]:
+           stages: bool = False, progress: bool = False) -> dict[str, Any]:
     """Replay ``path`` ``loops`` times (``None``: until Ctrl-C) through ``detector``;
     the summary: frames, loops, frames/s, detector ms/frame, detections, conversions, and
-    how it stopped (``"loops"`` or ``"interrupted"``)."""
+    how it stopped (``"loops"`` or ``"interrupted"``). ``out`` gets the annotated frames,
+    or with ``stages`` (Hough only) the seed's 2×2 stage view of each frame."""
+    if stages and detector is not Detector.HOUGH:
+        raise ValueError("stages is the Hough baseline's 2×2 view; use the hough detector")
     reader = VideoReader(path, size=(IMAGE_WIDTH_PX, IMAGE_HEIGHT_PX))
     hough_det = HoughDetector(hough.config()) if detector is Detector.HOUGH else None
     tfalda_det = TfaldaDetector(DetectorConfig.thesis()) if detector is Detector.TFALDA \
@@ -117,7 +131,7 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
             t0 = time.perf_counter()
             found, reset, picture = _frame_step(
                 detector, hough_det, tfalda_det, frame, writer is not None,
-                f"loop {loop + 1} frame {len(detections) + 1}")
+                f"loop {loop + 1} frame {len(detections) + 1}", stages)
             times.append(time.perf_counter() - t0)
             detections.append(found)
             resets += reset
@@ -173,6 +187,8 @@ def add_replay_parser(sub: Any) -> None:
                     help="Hough settings: the seed's numbers or the simulator preset "
                          "(default; the seed's 0.9 threshold finds no rendered marking)")
     rp.add_argument("--out", type=Path, help="annotated MP4 (segments or ROIs and lanes)")
+    rp.add_argument("--stages", action="store_true",
+                    help="hough: write the seed's 2×2 stage view to --out instead")
     rp.add_argument("--force", action="store_true", help="overwrite an existing --out")
     rp.add_argument("--json", action="store_true", help="print one JSON object")
     rp.set_defaults(func=cmd_replay)
@@ -183,10 +199,13 @@ def cmd_replay(args: argparse.Namespace) -> int:
             os.path.samefile(args.out, args.video):
         raise CliError("--out names the video being replayed; give another file")
     check_outputs({"out": args.out}, {"out": ".mp4"}, args.force)
+    if args.stages and (args.detector != Detector.HOUGH.value or args.out is None):
+        raise CliError("--stages writes the Hough stage view: use it with --detector hough "
+                       "and --out F.mp4")
     try:
         result = replay(args.video, Detector(args.detector),
                         loops=None if args.forever else args.loops, out=args.out,
-                        hough=HoughPreset(args.hough_preset),
+                        hough=HoughPreset(args.hough_preset), stages=args.stages,
                         progress=sys.stderr.isatty() or not args.json)
     except (FileNotFoundError, VideoError) as exc:
         raise CliError(str(exc)) from None

@@ -237,6 +237,22 @@ def test_replay_cli_json_and_bad_options(video: Path, tmp_path: Path, capsys) ->
             main(args)
 
 
+def test_stages_writes_the_seeds_2x2_view(video: Path, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "stages.mp4"
+    assert main(["replay", str(video), "--detector", "hough", "--out", str(out),
+                 "--stages", "--json"]) == 0
+    reader = VideoReader(out, size=(1504, 518))
+    assert (reader.info.width_px, reader.info.height_px) == (1504, 518)
+    assert len(list(reader.frames())) == FRAMES
+    capsys.readouterr()
+    for bad in (["--detector", "tfalda", "--out", str(tmp_path / "t.mp4")],
+                ["--detector", "hough"]):
+        assert main(["replay", str(video), *bad, "--stages"]) == 2
+        assert "--stages" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="hough"):
+        replay(video, Detector.TFALDA, stages=True)
+
+
 def test_the_seed_preset_is_the_seeds_numbers(video: Path) -> None:
     seed = replay(video, Detector.HOUGH, hough=replay_module.HoughPreset.SEED)
     assert seed["hough_preset"] == "seed" and seed["frames"] == FRAMES
