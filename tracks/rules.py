@@ -325,27 +325,40 @@ def _check_gaps(track: Track) -> list[Violation]:
         for shift in ((-total, 0.0, total) if track.closed else (0.0,)):
             events.append((g.s_m + shift, +1, g.line))
             events.append((g.s_m + g.length_m + shift, -1, g.line))
-    events.sort(key=lambda e: (e[0], e[1]))
+    events.sort(key=lambda e: e[0])
+    # Events at one place (within 1 µm) are applied together, openings first: gaps of one
+    # line that touch end to end are one missing stretch, and a gap of one line that ends
+    # where another line's begins does not count as two lines missing at once.
+    groups: list[list[tuple[float, int, object]]] = []
+    for e in events:
+        if groups and e[0] - groups[-1][0][0] < 1e-6:
+            groups[-1].append(e)
+        else:
+            groups.append([e])
     open_lines: dict[object, int] = {}
     since: dict[object, float] = {}
     joined: dict[object, int] = {}  # gaps that make up the current missing stretch
     reported: set[tuple[str, int]] = set()
-    for s, step, line in events:
-        before = open_lines.get(line, 0)
-        open_lines[line] = before + step
-        if step > 0:
-            joined[line] = 1 if before == 0 else joined[line] + 1
-            if before == 0:
-                since[line] = s
-        if step < 0 and open_lines[line] == 0 and joined[line] > 1:
-            run = s - since[line]
-            key = ("merged", round(since[line] % total if track.closed else since[line], 3))
-            if run > MAX_MARKING_GAP_M + 1e-9 and key not in reported and 0 <= since[line] < total:
-                reported.add(key)
-                out.append(Violation(
-                    "gap_length", "gaps",
-                    f"overlapping gaps leave the {line.value} line missing for {run:.3f} m from "
-                    f"s = {since[line]:.3f} m (rules: ≤ {MAX_MARKING_GAP_M:.2f} m)", since[line]))
+    for group in groups:
+        for s, step, line in sorted(group, key=lambda e: -e[1]):
+            before = open_lines.get(line, 0)
+            open_lines[line] = before + step
+            if step > 0:
+                joined[line] = 1 if before == 0 else joined[line] + 1
+                if before == 0:
+                    since[line] = s
+            if step < 0 and open_lines[line] == 0 and joined[line] > 1:
+                run = s - since[line]
+                key = ("merged", round(since[line] % total if track.closed else since[line], 3))
+                if run > MAX_MARKING_GAP_M + 1e-9 and key not in reported and \
+                        0 <= since[line] < total:
+                    reported.add(key)
+                    out.append(Violation(
+                        "gap_length", "gaps",
+                        f"gaps of the {line.value} line, end to end or overlapping, leave it "
+                        f"missing for {run:.3f} m from s = {since[line]:.3f} m (rules: ≤ "
+                        f"{MAX_MARKING_GAP_M:.2f} m)", since[line]))
+        s = group[0][0]
         missing = sum(1 for v in open_lines.values() if v > 0)
         if missing > MAX_LINES_MISSING and 0 <= s < total:
             key = ("many", round(s, 3))

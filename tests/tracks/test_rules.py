@@ -86,6 +86,12 @@ def test_gap_longer_than_a_metre() -> None:
     # Two touching gaps of one line make one long missing stretch.
     two = (Gap(Line.LEFT, 2.0, 0.8), Gap(Line.LEFT, 2.7, 0.8))
     assert rules_of(replace(strip, gaps=two)) == ["gap_length"]
+    # Exactly end to end (the second starts where the first ends, to rounding) too.
+    end_to_end = (Gap(Line.LEFT, 2.0, 0.8), Gap(Line.LEFT, 2.0 + 0.8, 0.8))
+    assert rules_of(replace(strip, gaps=end_to_end)) == ["gap_length"]
+    # Separated by 20 mm of paint: two gaps, both within the rules.
+    apart = (Gap(Line.LEFT, 2.0, 0.8), Gap(Line.LEFT, 2.82, 0.8))
+    assert rules_of(replace(strip, gaps=apart)) == []
 
 
 def test_at_most_two_lines_missing_at_once() -> None:
@@ -94,6 +100,9 @@ def test_at_most_two_lines_missing_at_once() -> None:
     assert rules_of(replace(strip, gaps=two)) == []
     three = (*two, Gap(Line.CENTRE, 2.5, 0.5))
     assert rules_of(replace(strip, gaps=three)) == ["lines_missing"]
+    # A third line's gap that begins exactly where another ends is not a third at once.
+    handover = (*two, Gap(Line.CENTRE, 2.8, 0.5))
+    assert rules_of(replace(strip, gaps=handover)) == []
 
 
 def test_obstacle_rules() -> None:
