@@ -78,6 +78,23 @@ class GeneratorParams:
             v = getattr(self, f.name)
             if isinstance(v, tuple) and not v[0] <= v[1]:
                 raise ValueError(f"{f.name}: range ({v[0]}, {v[1]}) has low > high")
+        lo, hi = rules.LANE_WIDTH_RANGE_M
+        if not lo <= self.lane_width_m <= hi:
+            raise ValueError(f"lane_width_m must be in [{lo}, {hi}] m (the rules' ≈ 0.40 m), "
+                             f"got {self.lane_width_m!r}")
+        for name in ("dent_probability_max", "clockwise_probability",
+                     "figure_eight_probability"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"{name} is a probability in [0, 1], got {getattr(self, name)!r}")
+        for name in ("gap_rate_max_per_m", "obstacle_rate_max_per_m", "min_straight_m",
+                     "start_clear_m"):
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0.0):
+                raise ValueError(f"{name} must be finite and ≥ 0, got {getattr(self, name)!r}")
+        if self.gap_length_m[0] <= 0.0 or self.gap_length_m[1] > rules.MAX_MARKING_GAP_M:
+            raise ValueError(f"gap_length_m must lie in (0, {rules.MAX_MARKING_GAP_M}] m (the "
+                             f"rules' longest gap), got {self.gap_length_m}")
+        if self.max_attempts < 1:
+            raise ValueError(f"max_attempts must be ≥ 1, got {self.max_attempts}")
         if self.radius_m[0] < rules.min_centre_radius_m(self.lane_width_m) - 1e-9:
             raise ValueError(
                 f"radius_m starts at {self.radius_m[0]} m, below the rules' minimum "

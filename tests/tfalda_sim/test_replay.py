@@ -193,9 +193,12 @@ def test_ctrl_c_exit_codes(video: Path, monkeypatch: pytest.MonkeyPatch, capsys)
 
 def test_forever_stops_on_sigint_from_the_command_line(video: Path) -> None:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    # A shell starts background jobs with SIGINT ignored, and Python keeps an ignored
+    # SIGINT: give the child the default disposition, as a terminal would.
     proc = subprocess.Popen([sys.executable, "-m", "tfalda_sim", "replay", str(video),
                              "--detector", "hough", "--forever"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         # Wait until frames flow: the progress bar on stderr counts one or more.
         deadline = time.monotonic() + 120

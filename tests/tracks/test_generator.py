@@ -60,10 +60,25 @@ def test_start_line_is_at_the_start_on_a_straight() -> None:
     ({"difficulty": 1.5}, "difficulty"),
     ({"radius_m": (1.0, 3.0)}, "minimum"),
     ({"extent_m": (5.0, 3.0)}, "low > high"),
+    ({"lane_width_m": 0.8}, "lane_width_m"),
+    ({"lane_width_m": float("nan")}, "lane_width_m"),
+    ({"clockwise_probability": 1.2}, "clockwise_probability"),
+    ({"gap_rate_max_per_m": -0.1}, "gap_rate_max_per_m"),
+    ({"start_clear_m": float("inf")}, "start_clear_m"),
+    ({"gap_length_m": (0.2, 1.5)}, "longest gap"),
+    ({"gap_length_m": (0.0, 0.5)}, "longest gap"),
+    ({"max_attempts": 0}, "max_attempts"),
 ])
 def test_bad_parameters_are_refused(kwargs: dict, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         GeneratorParams(**kwargs)
+
+
+def test_a_legal_other_lane_width_generates_a_valid_track() -> None:
+    from tracks.rules import validate
+
+    track = generate(5, GeneratorParams(lane_width_m=0.44, radius_m=(1.5, 4.0)))
+    assert track.lane_width_m == 0.44 and validate(track) == []
 
 
 @pytest.mark.parametrize("seed", [-1, 1.5, "7", True])
