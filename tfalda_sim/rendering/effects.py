@@ -52,8 +52,16 @@ class Effects:
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+                raise ValueError(f"Effects.{f.name} must be a number, got {v!r}")
             if not np.isfinite(v) or v < 0:
                 raise ValueError(f"Effects.{f.name} must be finite and ≥ 0, got {v!r}")
+        for name in ("glare_spots", "shadows"):  # counts: 2.5 spots is no number of spots
+            v = getattr(self, name)
+            if not float(v).is_integer():
+                raise ValueError(f"Effects.{name} counts spots, so it must be a whole number, "
+                                 f"got {v!r}")
+            object.__setattr__(self, name, int(v))
         for name in ("vignetting", "shadow_depth", "wear", "bonnet_reflectivity"):
             if getattr(self, name) > 1:
                 raise ValueError(f"Effects.{name} must be in [0, 1], got {getattr(self, name)}")

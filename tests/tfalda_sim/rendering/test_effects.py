@@ -28,7 +28,15 @@ def test_randomization_is_reproducible() -> None:
 
 
 @pytest.mark.parametrize(("field", "value"), [("gain", -1.0), ("vignetting", 1.5),
-                                              ("noise_dn", float("nan")), ("wear", 2.0)])
-def test_bad_effect_values_are_refused(field: str, value: float) -> None:
+                                              ("noise_dn", float("nan")), ("wear", 2.0),
+                                              ("glare_spots", 2.5), ("shadows", 1.2),
+                                              ("gain", "1.0"), ("shadows", True)])
+def test_bad_effect_values_are_refused(field: str, value: object) -> None:
     with pytest.raises(ValueError, match=field):
         Effects(**{field: value})
+
+
+def test_spot_counts_are_integers() -> None:
+    e = Effects(glare_spots=2.0, shadows=np.int64(3))
+    assert type(e.glare_spots) is int and type(e.shadows) is int
+    assert (e.glare_spots, e.shadows) == (2, 3)
