@@ -50,7 +50,11 @@ controlled [m] (about the lower ROI row)."""
 
 _SIGMA_Y_M = 0.03  # lane-centre measurement noise [m]
 _SIGMA_PSI_RAD = 0.1  # lane-direction measurement noise [rad]
-_PRIOR_SIGMA = np.array([0.02, 0.04, 0.1])  # per-frame uncertainty of y0, ψ0, κ
+# Per-frame uncertainty of the odometry-moved model: y0 [m], ψ0 [rad], κ [1/m]. The lane
+# at the axle barely changes from frame to frame (the odometry moves the model), its
+# curvature jumps where a curve begins: tight on y0 and ψ0, so lanes that slide onto the
+# wrong line over a few frames (the LIS losing a line) do not drag the model along.
+_PRIOR_SIGMA = np.array([0.005, 0.015, 0.1])
 _MODEL_SAMPLES_M = np.linspace(0.0, 1.4, 8)
 # No lane bends tighter than the rules allow (its right lane's centre: 0.2 m further out
 # in a left curve, in); 10 % spare for measurement noise.
