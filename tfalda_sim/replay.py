@@ -71,12 +71,15 @@ class HoughPreset(enum.Enum):
 def _frame_step(detector: Detector, hough: HoughDetector | None,
                 tfalda: TfaldaDetector | None, frame: np.ndarray,
                 annotate: bool, text: str, stages: bool = False
-                ) -> tuple[int, bool, np.ndarray | None]:
-    """Run the detector on one frame: (detections, LIS reset, annotated frame or None;
-    with ``stages`` the Hough baseline's 2×2 stage view instead of the frame)."""
+                ) -> tuple[int, bool, np.ndarray | None, float]:
+    """Run the detector on one frame: (detections, LIS reset, annotated frame or None —
+    with ``stages`` the Hough baseline's 2×2 stage view instead of the frame —, the
+    detector's own time [s], drawing not included)."""
+    t0 = time.perf_counter()
     if detector is Detector.HOUGH:
         assert hough is not None
         result = hough.detect(frame)
+        dt = time.perf_counter() - t0
         segments = result.segments
         picture = None
         if annotate and stages:
@@ -88,14 +91,15 @@ def _frame_step(detector: Detector, hough: HoughDetector | None,
                          cv2.LINE_AA)
             cv2.putText(picture, f"{text} hough: {len(segments)} segments", (8, 20),
                         cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 220, 255), 1, cv2.LINE_AA)
-        return len(segments), False, picture
+        return len(segments), False, picture, dt
     assert tfalda is not None
     obs = tfalda.process(frame)
+    dt = time.perf_counter() - t0
     # TFALDA always returns a lane per ROI; a detection is one the LIS did not replace by
     # last frame's.
     lanes = int((np.all(np.isfinite(obs.lanes), axis=1) & ~obs.replaced).sum())
     picture = draw_observation(frame, obs, text=text) if annotate else None
-    return lanes, bool(obs.reset), picture
+    return lanes, bool(obs.reset), picture, dt
 
 
 def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
@@ -128,11 +132,10 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
         bar = tqdm(total=loops * per_loop if loops and per_loop else None, unit="frame",
                    desc=f"replay {detector.value}", disable=not progress)
         for loop, frame in reader.loop(loops):
-            t0 = time.perf_counter()
-            found, reset, picture = _frame_step(
+            found, reset, picture, dt = _frame_step(
                 detector, hough_det, tfalda_det, frame, writer is not None,
                 f"loop {loop + 1} frame {len(detections) + 1}", stages)
-            times.append(time.perf_counter() - t0)
+            times.append(dt)
             detections.append(found)
             resets += reset
             if writer is not None and picture is not None:
