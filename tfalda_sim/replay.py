@@ -28,7 +28,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 from tqdm import tqdm
 
@@ -38,16 +37,13 @@ from .perception import (
     HoughConfig,
     HoughDetector,
     TfaldaDetector,
-    stage_view,
 )
 from .perception.params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX
-from .rendering.overlay import draw_observation, to_bgr
+from .rendering.overlay import draw_hough, draw_observation, stage_view
 from .video import VideoError, VideoReader, VideoWriter
 
 DEFAULT_FPS: float = 25.0
 """Frame rate of the annotated video when the recording declares none [1/s]."""
-SEGMENT_BGR: tuple[int, int, int] = (0, 0, 255)
-"""Hough segments in the annotated video (red, as the seed plots them)."""
 
 
 class Detector(enum.Enum):
@@ -82,15 +78,8 @@ def _frame_step(detector: Detector, hough: HoughDetector | None,
         dt = time.perf_counter() - t0
         segments = result.segments
         picture = None
-        if annotate and stages:
-            picture = stage_view(result)
-        elif annotate:
-            picture = to_bgr(frame)
-            for x1, y1, x2, y2 in np.rint(segments).astype(np.int64):
-                cv2.line(picture, (int(x1), int(y1)), (int(x2), int(y2)), SEGMENT_BGR, 2,
-                         cv2.LINE_AA)
-            cv2.putText(picture, f"{text} hough: {len(segments)} segments", (8, 20),
-                        cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 220, 255), 1, cv2.LINE_AA)
+        if annotate:
+            picture = stage_view(result) if stages else draw_hough(frame, result, text=text)
         return len(segments), False, picture, dt
     assert tfalda is not None
     obs = tfalda.process(frame)

@@ -9,7 +9,8 @@ import cv2
 
 from agents.oracle import OracleAgent
 from envs import TfaldaTrackEnv
-from tfalda_sim.perception import HoughConfig, HoughDetector, stage_view
+from tfalda_sim.perception import HoughConfig, HoughDetector
+from tfalda_sim.rendering.overlay import stage_view
 
 OUT = Path(__file__).resolve().parent.parent / "docs" / "hough" / "stage-view.png"
 

@@ -1,7 +1,7 @@
 """Perception: TFALDA with the Lane Inference System (thesis 2008) and the Hough baseline."""
 
 from .detector import LaneObservation, TfaldaDetector, check_frame
-from .hough import HoughConfig, HoughDetector, HoughResult, stage_view
+from .hough import HoughConfig, HoughDetector, HoughResult
 from .lane import Lane
 from .lis import LaneInferenceSystem, LisResult
 from .params import DetectorConfig, EdgeMode, LisConfig, RoiLayout, TfaldaConfig, WidthCheck
@@ -10,4 +10,4 @@ from .rois import Roi, StateKind
 __all__ = ["DetectorConfig", "EdgeMode", "HoughConfig", "HoughDetector", "HoughResult", "Lane",
            "LaneInferenceSystem", "LaneObservation", "LisConfig", "LisResult", "Roi",
            "RoiLayout", "StateKind", "TfaldaConfig", "TfaldaDetector", "WidthCheck",
-           "check_frame", "stage_view"]
+           "check_frame"]

@@ -1,12 +1,13 @@
 """The thesis' TFALDA Visualizer (chapter 4): a camera frame in colour with the ROIs, the
-lanes and, optionally, the ground truth drawn in."""
+lanes and, optionally, the ground truth drawn in; and the Hough baseline's segments and
+its seed's 2×2 stage view."""
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
 
-from ..perception import LaneObservation
+from ..perception import HoughResult, LaneObservation
 from .truth import FrameTruth
 
 ROI_BGR = (255, 160, 0)
@@ -58,3 +59,59 @@ def draw_observation(frame: np.ndarray, obs: LaneObservation, *,
     cv2.putText(out, status, (8, 8 + th), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1,
                 cv2.LINE_AA)
     return out
+
+
+# --------------------------------------------------------------------------- Hough baseline
+SEGMENT_BGR: tuple[int, int, int] = (0, 0, 255)
+"""Hough segments (the seed plots them in red)."""
+MASK_BGR: tuple[int, int, int] = (255, 160, 0)
+"""Outlines of the car-mask rectangles in the stage view's panel 1 (not in the seed)."""
+TITLE_BGR: tuple[int, int, int] = (0, 220, 255)
+"""Panel titles and status text."""
+
+
+def draw_segments(image: np.ndarray, segments: np.ndarray, *, row_offset_px: int = 0) -> None:
+    """Draw the segments ``(N, 4)`` (x1, y1, x2, y2) [px] into the BGR ``image``, rows
+    shifted by ``-row_offset_px`` (full-image segments on a crop)."""
+    for x1, y1, x2, y2 in np.rint(segments).astype(np.int64):
+        cv2.line(image, (int(x1), int(y1) - row_offset_px), (int(x2), int(y2) - row_offset_px),
+                 SEGMENT_BGR, 2, cv2.LINE_AA)
+
+
+def _panel(image: np.ndarray) -> np.ndarray:
+    """A bool stage image as white-on-black BGR."""
+    return cv2.cvtColor(image.astype(np.uint8) * 255, cv2.COLOR_GRAY2BGR)
+
+
+def _title(panel: np.ndarray, title: str) -> None:
+    """``title`` in the panel's top-left corner, outlined in black to read on white."""
+    org = (8, 22)
+    cv2.putText(panel, title, org, cv2.FONT_HERSHEY_SIMPLEX, 0.6, (0, 0, 0), 4, cv2.LINE_AA)
+    cv2.putText(panel, title, org, cv2.FONT_HERSHEY_SIMPLEX, 0.6, TITLE_BGR, 1, cv2.LINE_AA)
+
+
+def draw_hough(frame: np.ndarray, result: HoughResult, *, text: str = "") -> np.ndarray:
+    """The frame (grey or BGR) with the Hough segments in red and a status line."""
+    out = to_bgr(frame)
+    draw_segments(out, result.segments)
+    cv2.putText(out, f"{text} hough: {len(result.segments)} segments".strip(), (8, 20),
+                cv2.FONT_HERSHEY_SIMPLEX, 0.5, TITLE_BGR, 1, cv2.LINE_AA)
+    return out
+
+
+def stage_view(result: HoughResult) -> np.ndarray:
+    """The seed's 2×2 figure as one uint8 BGR image, (2·crop_height, 2·752, 3). The panels
+    are crop-sized: 1) ROI + im2bw, with the car mask outlined, 2) Sobel edges, 3) merged
+    lines, 4) the Hough segments in red over the merged image."""
+    p1 = _panel(result.binary)
+    for r0, r1, c0, c1 in result.car_mask:
+        cv2.rectangle(p1, (c0, r0), (c1 - 1, r1 - 1), MASK_BGR, 1)
+    p2 = _panel(result.sobel)
+    p3 = _panel(result.merged)
+    p4 = p3.copy()
+    draw_segments(p4, result.segments, row_offset_px=result.crop_top_px)
+    _title(p1, "1) ROI + im2bw" + (" (car mask outlined)" if result.car_mask else ""))
+    _title(p2, "2) Sobel, vertical edges")
+    _title(p3, "3) merged double edges")
+    _title(p4, f"4) Hough: {len(result.segments)} segments")
+    return np.vstack((np.hstack((p1, p2)), np.hstack((p3, p4))))

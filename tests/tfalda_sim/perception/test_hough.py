@@ -27,7 +27,6 @@ from tfalda_sim.perception.hough import (
     hough_transform,
     merge_double_edges,
     sobel_vertical_edges,
-    stage_view,
     theta_grid,
 )
 
@@ -409,7 +408,6 @@ def test_a_black_frame_gives_no_segments() -> None:
     assert r.segments.shape == (0, 4) and r.peaks.shape == (0, 2)
     assert r.segment_theta_deg.shape == (0,) and r.peak_votes.shape == (0,)
     assert not r.accumulator.any() and r.peak_threshold == 1
-    assert stage_view(r).shape == (2 * CROP_HEIGHT_PX, 2 * W_PX, 3)
 
 
 def test_peaks_respect_the_threshold_count_and_neighbourhood() -> None:
@@ -493,23 +491,6 @@ def test_config_defaults_masks_and_oversized_neighbourhoods() -> None:
         c.num_peaks = 3  # type: ignore[misc]
     with pytest.raises(ValueError, match="peak_nhood"):
         HoughDetector(HoughConfig(peak_nhood=(3, 401)))
-
-
-def test_stage_view_is_the_2x2_figure() -> None:
-    lines = ((100, 477, 300, 219), (650, 477, 430, 219))
-    r = HoughDetector(HoughConfig(car_mask=())).detect(frame_with(*lines, thickness=14))
-    view = stage_view(r)
-    assert view.shape == (518, 1504, 3) and view.dtype == np.uint8
-    ch, cw = CROP_HEIGHT_PX, W_PX
-    below_title = slice(30, ch)
-    # panels 1–3 are the stage images (white on black) below their titles
-    for panel, image in (((0, 0), r.binary), ((0, 1), r.sobel), ((1, 0), r.merged)):
-        top, left = panel[0] * ch, panel[1] * cw
-        got = view[top:top + ch, left:left + cw]
-        assert np.array_equal(got[below_title, :, 1], image[below_title].astype(np.uint8) * 255)
-    red = (view[..., 2] > 200) & (view[..., 1] < 60) & (view[..., 0] < 60)
-    assert red[ch:, cw:].sum() > 200  # the segments, in panel 4 only
-    assert not red[:ch].any() and not red[ch:, :cw].any()
 
 
 def test_detect_is_deterministic_and_stateless() -> None:
