@@ -486,6 +486,11 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         ROIs are rendered, the full frame is rendered here with the same noise)."""
         if self._world is None:
             raise RuntimeError("call reset() before camera_frame()")
+        return self._full_frame().copy()
+
+    def _full_frame(self) -> np.ndarray:
+        """The last observation's full frame (rendered once in "lanes" mode), not copied."""
+        assert self._world is not None
         frame = self._last_frame
         if frame is None:
             frame = self.renderer.render(self._scene, self._camera_at,  # type: ignore[arg-type]
@@ -494,7 +499,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             apply_image_faults([frame], [(0, 0, frame.shape[1], frame.shape[0])],
                                self._image_faults())
             self._last_frame = frame
-        return frame.copy()
+        return frame
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:
@@ -503,7 +508,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             return None
         if self._world is None:
             raise RuntimeError("call reset() before render()")
-        frame = self.camera_frame()
+        frame = self._full_frame()  # draw_observation copies it
         pos = self._position
         text = (f"{self._track_label}  lap {self._laps()}  e_y {pos.cross_track_m:+.3f} m  "
                 f"v {self._world.speed_m_s:.2f} m/s")
