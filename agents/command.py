@@ -4,16 +4,24 @@ from __future__ import annotations
 
 import argparse
 import json
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
+from tqdm import tqdm
+
 from tfalda_sim.cli_common import (
+    DIRECTORY,
+    SPEED_HELP,
     CliError,
+    bounded_int_arg,
     check_outputs,
-    positive_float_arg,
+    interrupted,
     positive_int_arg,
+    seed_arg,
     seed_range_arg,
+    speed_arg,
+    workers_arg_value,
 )
 from tracks import NAMED_TRACKS, generate, load_named
 
@@ -28,7 +36,7 @@ def add_drive_parser(sub: Any) -> None:
     dr.add_argument("--track", default="7",
                     help=f"a named track ({', '.join(NAMED_TRACKS)}) or a generator seed")
     dr.add_argument("--laps", type=positive_int_arg, default=2)
-    dr.add_argument("--speed", type=positive_float_arg, default=1.5, help="[m/s]")
+    dr.add_argument("--speed", type=speed_arg, default=1.5, help=SPEED_HELP)
     dr.add_argument("--obstacles", action="store_true",
                     help="keep a generated track's cartons (the agents do not avoid them)")
     dr.add_argument("--no-recover", action="store_true",
@@ -57,8 +65,6 @@ def _cmd_drive(args: argparse.Namespace) -> int:
                        f"({', '.join(NAMED_TRACKS)}) nor a seed (a non-negative integer)")
     if not track.closed:
         raise CliError(f"--track {args.track} is not a loop; laps need a closed track")
-    if args.speed > 8.3:
-        raise CliError(f"--speed {args.speed} m/s is above the car's top speed 8.3 m/s")
     try:
         agent = make_agent(args.agent, args.policy)
     except (ValueError, FileNotFoundError, ImportError) as exc:
@@ -86,19 +92,34 @@ def _cmd_drive(args: argparse.Namespace) -> int:
         for path in (args.video, args.camera_video):
             if path:
                 print(f"  wrote {path}")
+    if result.ended == "interrupted":
+        kept = " and ".join(str(p) for p in (args.video, args.camera_video) if p)
+        return interrupted(f"drove {result.laps_completed} of {args.laps} laps "
+                           f"({result.steps} frames)"
+                           + (f"; kept {kept} up to that frame" if kept else ""))
     return 0 if result.laps_completed == args.laps else 1
+
+
+MAX_N_ENVS: int = 64
+"""Most training envs: each SubprocVecEnv worker holds a renderer and a scene (hundreds
+of MB); more than this is a typo, not a training set-up."""
 
 
 def add_train_parser(sub: Any) -> None:
     tr = sub.add_parser("train", help="train a PPO steering policy (needs the rl extra)",
                         description="PPO (stable-baselines3) on vectorised TfaldaTrack-v0 envs "
                                     "over the training track seeds; TensorBoard logs, "
-                                    "checkpoints, the policy and train.json in --out.")
-    tr.add_argument("--timesteps", type=positive_int_arg, default=1_000_000)
-    tr.add_argument("--n-envs", type=positive_int_arg, default=2)
-    tr.add_argument("--seed", type=int, default=0)
-    tr.add_argument("--speed", type=positive_float_arg, default=1.5, help="[m/s]")
-    tr.add_argument("--out", type=Path, default=Path("runs/ppo"))
+                                    "checkpoints, the policy and train.json in --out. Ctrl-C "
+                                    "stops the training and keeps the policy so far.")
+    tr.add_argument("--timesteps", type=bounded_int_arg(1, 10**12), default=1_000_000)
+    tr.add_argument("--n-envs", type=bounded_int_arg(1, MAX_N_ENVS), default=2,
+                    help=f"envs stepped in parallel, one process each (1–{MAX_N_ENVS})")
+    tr.add_argument("--seed", type=seed_arg, default=0)
+    tr.add_argument("--speed", type=speed_arg, default=1.5, help=SPEED_HELP)
+    tr.add_argument("--out", type=Path, default=Path("runs/ppo"),
+                    help="folder for policy.zip, train.json, tb/ and checkpoints/")
+    tr.add_argument("--force", action="store_true",
+                    help="replace an earlier run's policy.zip and train.json in --out")
     tr.add_argument("--json", action="store_true", help="print one JSON object")
     tr.set_defaults(func=_cmd_train)
 
@@ -109,15 +130,27 @@ def _cmd_train(args: argparse.Namespace) -> int:
     except ImportError:
         raise CliError("training needs the rl extra: pip install torch==2.13.0 && "
                        "pip install -e '.[rl]'") from None
+    from tfalda_sim.parallel import WORKER_MEMORY_BYTES, available_memory_bytes
+
     from .train import train
 
-    if (args.out / "policy.zip").exists():
-        raise CliError(f"{args.out / 'policy.zip'} exists; choose another --out")
+    check_outputs({"out": args.out}, {"out": DIRECTORY}, args.force,
+                  files_in={"out": ("policy.zip", "train.json")})
+    mem = available_memory_bytes()
+    if args.n_envs > 1 and mem is not None and args.n_envs * WORKER_MEMORY_BYTES > mem:
+        raise CliError(f"--n-envs {args.n_envs} needs about "
+                       f"{args.n_envs * WORKER_MEMORY_BYTES / 2**30:.1f} GiB, "
+                       f"{mem / 2**30:.1f} GiB is available; use at most "
+                       f"{max(1, mem // WORKER_MEMORY_BYTES)}")
     summary = train(args.timesteps, args.n_envs, args.seed, args.out, speed_m_s=args.speed,
                     progress=not args.json)
     print(json.dumps(summary) if args.json else
-          f"trained {args.timesteps} steps in {summary['train_time_s']:.0f} s → "
+          f"trained {summary['timesteps_done']} steps in {summary['train_time_s']:.0f} s → "
           f"{args.out / 'policy.zip'}")
+    if summary["interrupted"]:
+        return interrupted(f"stopped after {summary['timesteps_done']} of {args.timesteps} "
+                           f"steps; kept the policy so far ({args.out / 'policy.zip'}), "
+                           f"train.json, the checkpoints and the TensorBoard logs")
     return 0
 
 
@@ -127,31 +160,78 @@ def add_stress_parser(sub: Any) -> None:
     st = sub.add_parser("stress", help="stress-test the LIS reset logic with injected faults",
                         description="Closed-loop PID drives with a battery of faults, each with "
                                     "and without the LIS reset stage: resets, frames until the "
-                                    "lanes are valid again, false resets, departures.")
+                                    "lanes are valid again, false resets, departures. Runs "
+                                    "stream to OUT/stress.jsonl as they finish; Ctrl-C keeps "
+                                    "the finished runs and their summary.")
     st.add_argument("--seeds", type=seed_range_arg, default=range(10_000, 10_010),
                     help="generated tracks A:B")
     st.add_argument("--faults", default=",".join(FAULTS),
                     help=f"comma-separated subset of: {', '.join(FAULTS)}")
-    st.add_argument("--workers", type=positive_int_arg, help="processes (default: all CPUs)")
+    st.add_argument("--workers", type=positive_int_arg,
+                    help="processes (default: all CPUs; capped at the jobs, CPUs and memory)")
     st.add_argument("--out", type=Path, default=Path("out/stress"),
-                    help="directory for stress.json, stress.md and stress.png")
+                    help="folder for stress.jsonl, stress.json, stress.md and stress.png")
+    st.add_argument("--force", action="store_true", help="overwrite an earlier report in --out")
     st.add_argument("--json", action="store_true", help="print the summary as JSON")
     st.set_defaults(func=_cmd_stress)
 
 
 def _cmd_stress(args: argparse.Namespace) -> int:
-    from .stress import FAULTS, markdown_table, report, run_battery
+    from tfalda_sim.outputs import Outputs
 
-    faults = [f.strip() for f in args.faults.split(",") if f.strip()]
-    unknown = [f for f in faults if f not in FAULTS]
-    if unknown or not faults:
-        raise CliError(f"unknown fault(s) {', '.join(unknown) or '(none given)'}; "
-                       f"known: {', '.join(FAULTS)}")
-    runs = run_battery(args.seeds, faults, workers=args.workers, progress=not args.json)
-    result = report(runs, args.out)
+    from .stress import (
+        REPORT_FILES,
+        StressTally,
+        check_faults,
+        iter_battery,
+        markdown_table,
+        plot,
+        report_document,
+    )
+
+    try:
+        faults = check_faults([f.strip() for f in args.faults.split(",") if f.strip()])
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    check_outputs({"out": args.out}, {"out": DIRECTORY}, args.force,
+                  files_in={"out": REPORT_FILES.values()})
+    jobs = len(args.seeds) * len(faults) * 2
+    workers = workers_arg_value(args.workers, jobs)
+    tally = StressTally()
+    stopped = False
+    with Outputs() as outs:
+        files = {k: outs.path(args.out / name) for k, name in REPORT_FILES.items()}
+        with open(files["jsonl"], "w", encoding="utf-8") as fh, \
+                tqdm(total=jobs, desc="stress", unit="run", disable=args.json) as bar:
+            runs = iter_battery(args.seeds, faults, workers=workers)
+            try:
+                for run in runs:
+                    fh.write(json.dumps(asdict(run)) + "\n")
+                    fh.flush()  # a finished run is on disk at once
+                    tally.add(run)
+                    bar.update()
+            except KeyboardInterrupt:
+                stopped = True
+            finally:
+                runs.close()
+        rows = tally.rows()
+        if not rows:
+            outs.abort()
+            return interrupted("no run had finished; nothing written")
+        with open(files["json"], "w", encoding="utf-8") as fh:
+            json.dump(report_document(rows, tally.runs) | {"interrupted": stopped}, fh,
+                      indent=1)
+        files["md"].write_text(markdown_table(rows) + "\n", encoding="utf-8")
+        plot(rows, files["png"])
+        outs.commit()
+    written = ", ".join(REPORT_FILES.values())
     if args.json:
-        print(json.dumps({"summary": result["summary"], "out": str(args.out)}))
+        print(json.dumps({"summary": rows, "runs": tally.runs, "jobs": jobs,
+                          "interrupted": stopped, "out": str(args.out)}))
     else:
-        print(markdown_table(result["summary"]))
-        print(f"wrote {args.out}/stress.json, stress.md, stress.png")
+        print(markdown_table(rows))
+        print(f"wrote {args.out}/: {written}")
+    if stopped:
+        return interrupted(f"kept the {tally.runs} of {jobs} runs that had finished and their "
+                           f"summary in {args.out}/ ({written})")
     return 0

@@ -14,17 +14,18 @@ any fault counts the resets that happen anyway. Per run:
   resets of the fault-free run);
 - ``on_road``: the car never left the road.
 
-``run_battery`` runs seed ranges in a process pool (results do not depend on the worker
-count) with a progress bar; ``report`` writes JSON, a Markdown table and a PNG chart.
+``iter_battery`` streams the runs of a seed range from a process pool (bounded memory for
+any range; results do not depend on the worker count); ``StressTally`` summarises them
+as they come; ``tfalda-sim stress`` writes every run (JSON Lines) as it finishes, then the
+summary as JSON, a Markdown table and a PNG chart.
 """
 
 from __future__ import annotations
 
-import json
 import math
-from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, replace
+from collections import Counter
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +42,7 @@ from tfalda_sim.faults import (
     MarkingGap,
     Overexposure,
 )
+from tfalda_sim.parallel import stream
 from tfalda_sim.perception import DetectorConfig
 from tracks import Lane, Obstacle, Track, generate
 from tracks.rules import MAX_MARKING_GAP_M
@@ -187,37 +189,106 @@ def _run(args: tuple[int, str, bool]) -> StressRun:
     return run_one(*args)
 
 
-def run_battery(seeds: Sequence[int], faults: Sequence[str] | None = None, *,
-                workers: int | None = None, progress: bool = True) -> list[StressRun]:
-    """Every fault × {with, without the reset stage} × seed, in a process pool."""
-    names = list(faults or FAULTS)
+def check_faults(faults: Sequence[str] | None) -> list[str]:
+    """The fault names to run (default: the whole battery); unknown names refused."""
+    names = list(FAULTS if faults is None else faults)
     unknown = [f for f in names if f not in FAULTS]
-    if unknown:
-        raise ValueError(f"unknown fault(s) {', '.join(unknown)}; known: {', '.join(FAULTS)}")
-    jobs = [(seed, f, stage) for f in names for stage in (True, False) for seed in seeds]
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        return list(tqdm(pool.map(_run, jobs, chunksize=1), total=len(jobs), desc="stress",
-                         disable=not progress))
+    if unknown or not names:
+        raise ValueError(f"unknown fault(s) {', '.join(unknown) or '(none given)'}; "
+                         f"known: {', '.join(FAULTS)}")
+    return names
 
 
-def summarise(runs: Sequence[StressRun]) -> list[dict[str, Any]]:
-    """Per fault and reset stage: reset rate, recovery rate, median frames to recover,
-    false resets per run, share of runs that stayed on the road."""
-    rows = []
-    keys = sorted({(r.fault, r.lis_reset_stage) for r in runs},
-                  key=lambda k: (list(FAULTS).index(k[0]), not k[1]))
-    for fault, stage in keys:
-        group = [r for r in runs if r.fault == fault and r.lis_reset_stage == stage]
-        frames = [r.frames_to_recover for r in group if r.frames_to_recover is not None]
-        rows.append({
-            "fault": fault, "lis_reset_stage": stage, "runs": len(group),
-            "reset_rate": float(np.mean([r.reset for r in group])),
-            "recovered_rate": len(frames) / len(group),
-            "median_frames_to_recover": float(np.median(frames)) if frames else None,
-            "false_resets_per_run": float(np.mean([r.false_resets for r in group])),
-            "on_road_rate": float(np.mean([r.on_road for r in group])),
-        })
-    return rows
+def battery_jobs(seeds: Iterable[int], faults: Sequence[str]) -> Iterator[tuple[int, str, bool]]:
+    """(seed, fault, reset stage) for every run, seed by seed: a long range interrupted
+    early has every fault of the seeds it reached, and the jobs are never all in memory."""
+    for seed in seeds:
+        for fault in faults:
+            for stage in (True, False):
+                yield int(seed), fault, stage
+
+
+def iter_battery(seeds: Iterable[int], faults: Sequence[str] | None = None, *,
+                 workers: int = 1) -> Iterator[StressRun]:
+    """Every fault × {with, without the reset stage} × seed, streamed from a process pool
+    of ``workers`` (``tfalda_sim.parallel.stream``: bounded memory for any range, results
+    in job order and independent of the worker count)."""
+    yield from stream(_run, battery_jobs(seeds, check_faults(faults)), workers=workers)
+
+
+def run_battery(seeds: Sequence[int], faults: Sequence[str] | None = None, *,
+                workers: int = 1, progress: bool = False) -> list[StressRun]:
+    """``iter_battery`` collected into a list (for small ranges), with a progress bar."""
+    names = check_faults(faults)
+    return list(tqdm(iter_battery(seeds, names, workers=workers),
+                     total=len(seeds) * len(names) * 2, desc="stress", disable=not progress))
+
+
+@dataclass
+class _Group:
+    runs: int = 0
+    resets: int = 0
+    false_resets: int = 0
+    on_road: int = 0
+    frames: Counter[int] = field(default_factory=Counter)
+
+
+class StressTally:
+    """The summary of a battery, updated run by run: memory bounded by the number of
+    faults (``frames_to_recover`` is a count in [0, AFTER_STEPS], kept as a histogram, so
+    the median is exact)."""
+
+    def __init__(self) -> None:
+        self._groups: dict[tuple[str, bool], _Group] = {}
+        self.runs = 0
+
+    def add(self, run: StressRun) -> None:
+        g = self._groups.setdefault((run.fault, run.lis_reset_stage), _Group())
+        g.runs += 1
+        g.resets += run.reset
+        g.false_resets += run.false_resets
+        g.on_road += run.on_road
+        if run.frames_to_recover is not None:
+            g.frames[run.frames_to_recover] += 1
+        self.runs += 1
+
+    def rows(self) -> list[dict[str, Any]]:
+        """Per fault and reset stage: reset rate, recovery rate, median frames to
+        recover, false resets per run, share of runs that stayed on the road."""
+        rows = []
+        for fault, stage in sorted(self._groups, key=lambda k: (list(FAULTS).index(k[0]),
+                                                                not k[1])):
+            g = self._groups[(fault, stage)]
+            recovered = sum(g.frames.values())
+            rows.append({
+                "fault": fault, "lis_reset_stage": stage, "runs": g.runs,
+                "reset_rate": g.resets / g.runs,
+                "recovered_rate": recovered / g.runs,
+                "median_frames_to_recover": _median(g.frames),
+                "false_resets_per_run": g.false_resets / g.runs,
+                "on_road_rate": g.on_road / g.runs,
+            })
+        return rows
+
+
+def _median(counts: Counter[int]) -> float | None:
+    """The median of a histogram of integers (numpy's convention for an even count)."""
+    n = sum(counts.values())
+    if n == 0:
+        return None
+    values = sorted(counts)
+    cum = np.cumsum([counts[v] for v in values])
+    lo = values[int(np.searchsorted(cum, (n - 1) // 2, side="right"))]
+    hi = values[int(np.searchsorted(cum, n // 2, side="right"))]
+    return (lo + hi) / 2.0
+
+
+def summarise(runs: Iterable[StressRun]) -> list[dict[str, Any]]:
+    """``StressTally.rows`` of ``runs``."""
+    tally = StressTally()
+    for run in runs:
+        tally.add(run)
+    return tally.rows()
 
 
 def markdown_table(rows: Sequence[dict[str, Any]]) -> str:
@@ -265,14 +336,14 @@ def plot(rows: Sequence[dict[str, Any]], path: Path) -> None:
     plt.close(fig)
 
 
-def report(runs: Sequence[StressRun], out_dir: Path) -> dict[str, Any]:
-    """Write ``stress.json``, ``stress.md`` and ``stress.png`` to ``out_dir``."""
-    rows = summarise(runs)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    result = {"summary": rows, "runs": [asdict(r) for r in runs],
-              "onset_step": ONSET_STEP, "after_steps": AFTER_STEPS,
-              "valid_hit_rate": VALID_HIT_RATE, "valid_frames": VALID_FRAMES}
-    (out_dir / "stress.json").write_text(json.dumps(result, indent=1))
-    (out_dir / "stress.md").write_text(markdown_table(rows) + "\n")
-    plot(rows, out_dir / "stress.png")
-    return result
+REPORT_FILES: dict[str, str] = {"jsonl": "stress.jsonl", "json": "stress.json",
+                               "md": "stress.md", "png": "stress.png"}
+"""What ``tfalda-sim stress --out DIR`` writes into DIR: every run (JSON Lines, streamed
+as the runs finish), the summary (JSON, Markdown) and its chart."""
+
+
+def report_document(rows: Sequence[dict[str, Any]], runs: int) -> dict[str, Any]:
+    """The content of ``stress.json``: the summary and the battery's constants."""
+    return {"summary": list(rows), "runs": runs, "runs_file": REPORT_FILES["jsonl"],
+            "onset_step": ONSET_STEP, "after_steps": AFTER_STEPS,
+            "valid_hit_rate": VALID_HIT_RATE, "valid_frames": VALID_FRAMES}

@@ -11,9 +11,13 @@ command's arguments, the training time, the machine). Needs the ``rl`` extra.
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 import platform
+import shutil
+import signal
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,38 +55,117 @@ def env_kwargs(speed_m_s: float = TRAIN_SPEED_M_S, seeds: tuple[int, int] = TRAI
     return {"track": track, "track_seeds": seeds, "speed_m_s": speed_m_s}
 
 
+OUT_FILES: tuple[str, ...] = ("policy.zip", "train.json", "tb", "checkpoints")
+"""What ``train`` writes into its ``out`` folder."""
+
+
+def _make_env(**kwargs: Any) -> Any:
+    """One training env through the registered id: Gymnasium's TimeLimit ends episodes
+    after MAX_EPISODE_STEPS (without it a good policy drives one track forever). In a
+    SubprocVecEnv worker Ctrl-C is ignored: the parent stops the training and closes the
+    workers (a worker interrupted mid-step would only print a traceback)."""
+    import gymnasium
+
+    if multiprocessing.parent_process() is not None:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return gymnasium.make("tfalda_sim:TfaldaTrack-v0", **kwargs)
+
+
+def _progress_callback(total: int) -> Any:
+    """A tqdm progress bar as an SB3 callback (SB3's own needs rich, which we do not
+    depend on)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+    from tqdm import tqdm
+
+    class TqdmCallback(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.bar = tqdm(total=total, desc="train", unit="step")
+
+        def _on_step(self) -> bool:
+            self.bar.update(self.training_env.num_envs)
+            return True
+
+        def _on_training_end(self) -> None:
+            self.bar.close()
+
+    return TqdmCallback()
+
+
+def _publish_run(staging: Path, out: Path) -> None:
+    """Move a finished (or interrupted) run from its staging folder into ``out``: files
+    replace files of the same name, folders (tb, checkpoints) are merged."""
+    out.mkdir(parents=True, exist_ok=True)
+    for entry in staging.iterdir():
+        target = out / entry.name
+        if entry.is_dir():
+            target.mkdir(exist_ok=True)
+            for child in entry.iterdir():
+                dest = target / child.name
+                if dest.is_dir() and not dest.is_symlink():
+                    shutil.rmtree(dest)
+                os.replace(child, dest)
+        else:
+            os.replace(entry, target)
+    shutil.rmtree(staging, ignore_errors=True)
+
+
 def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfig | None = None,
           speed_m_s: float = TRAIN_SPEED_M_S, progress: bool = True,
           subprocess: bool = True, track: str | int | None = None) -> dict[str, Any]:
     """Train PPO and save it under ``out``; returns the summary written to train.json.
-    ``track`` fixes the track (default: the generated ``TRAIN_SEEDS``)."""
+    ``track`` fixes the track (default: the generated ``TRAIN_SEEDS``).
+
+    The run is written to a staging folder beside ``out`` and moved into ``out`` when it
+    ends: an error leaves ``out`` as it was. A Ctrl-C ends the training early and keeps
+    the policy so far (``summary["interrupted"]``, ``summary["timesteps_done"]``)."""
     from stable_baselines3 import PPO
-    from stable_baselines3.common.callbacks import CheckpointCallback
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     cfg = config or PpoConfig()
-    out.mkdir(parents=True, exist_ok=True)
-    vec_cls = SubprocVecEnv if subprocess and n_envs > 1 else DummyVecEnv
-    # Through the registered id: Gymnasium's TimeLimit ends episodes after
-    # MAX_EPISODE_STEPS (without it a good policy drives one track forever).
-    venv = make_vec_env("tfalda_sim:TfaldaTrack-v0", n_envs=n_envs, seed=seed,
-                        vec_env_cls=vec_cls, env_kwargs=env_kwargs(speed_m_s, track=track))
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
     try:
-        model = PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size,
-                    n_epochs=cfg.n_epochs, learning_rate=cfg.learning_rate, gamma=cfg.gamma,
-                    gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
-                    ent_coef=cfg.ent_coef, policy_kwargs={"net_arch": list(cfg.net_arch)},
-                    seed=seed, device="cpu", verbose=0, tensorboard_log=str(out / "tb"))
-        checkpoints = CheckpointCallback(max(1, 100_000 // n_envs), str(out / "checkpoints"),
-                                         name_prefix="ppo")
-        t0 = time.perf_counter()
-        model.learn(timesteps, callback=checkpoints, progress_bar=progress)
-        elapsed = time.perf_counter() - t0
-        model.save(out / "policy.zip")
+        vec_cls = SubprocVecEnv if subprocess and n_envs > 1 else DummyVecEnv
+        venv = make_vec_env(_make_env, n_envs=n_envs, seed=seed, vec_env_cls=vec_cls,
+                            env_kwargs=env_kwargs(speed_m_s, track=track))
+        interrupted = False
+        try:
+            model = PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size,
+                        n_epochs=cfg.n_epochs, learning_rate=cfg.learning_rate,
+                        gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
+                        ent_coef=cfg.ent_coef, policy_kwargs={"net_arch": list(cfg.net_arch)},
+                        seed=seed, device="cpu", verbose=0,
+                        tensorboard_log=str(staging / "tb"))
+            callbacks = [CheckpointCallback(max(1, 100_000 // n_envs),
+                                            str(staging / "checkpoints"), name_prefix="ppo")]
+            if progress:  # PPO learns in whole rollouts of n_steps per env
+                rollout = cfg.n_steps * n_envs
+                callbacks.append(_progress_callback(-(-timesteps // rollout) * rollout))
+            t0 = time.perf_counter()
+            try:
+                model.learn(timesteps, callback=CallbackList(callbacks))
+            except KeyboardInterrupt:
+                interrupted = True  # keep the policy so far
+            elapsed = time.perf_counter() - t0
+            model.save(staging / "policy.zip")
+        finally:
+            venv.close()
+        summary = _summary(timesteps, n_envs, seed, speed_m_s, track, cfg, elapsed, out)
+        summary.update(interrupted=interrupted, timesteps_done=int(model.num_timesteps))
+        (staging / "train.json").write_text(json.dumps(summary, indent=2))
+        _publish_run(staging, out)
     finally:
-        venv.close()
-    summary = {"timesteps": timesteps, "n_envs": n_envs, "seed": seed, "speed_m_s": speed_m_s,
+        shutil.rmtree(staging, ignore_errors=True)
+    return summary
+
+
+def _summary(timesteps: int, n_envs: int, seed: int, speed_m_s: float,
+             track: str | int | None, cfg: PpoConfig, elapsed: float, out: Path
+             ) -> dict[str, Any]:
+    return {"timesteps": timesteps, "n_envs": n_envs, "seed": seed, "speed_m_s": speed_m_s,
                "track": track, "train_seeds": list(TRAIN_SEEDS), "config": cfg.__dict__ | {
                    "net_arch": list(cfg.net_arch)},
                "train_time_s": elapsed, "cores": os.cpu_count(),
@@ -91,8 +174,6 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
                "command": (f"tfalda-sim train --timesteps {timesteps} --n-envs {n_envs} "
                            f"--seed {seed} --speed {speed_m_s:g} --out {out}"
                            + (f"  (Python: track={track!r})" if track is not None else ""))}
-    (out / "train.json").write_text(json.dumps(summary, indent=2))
-    return summary
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -9,7 +9,7 @@ the reward comes from the track geometry. Every stage lives in ``tfalda_sim`` an
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, fields, replace
 from enum import Enum
 from typing import Any, ClassVar
@@ -30,7 +30,6 @@ from tfalda_sim.faults import (
     Overexposure,
     active,
     apply_image_faults,
-    check_schedule,
     with_gaps,
 )
 from tfalda_sim.perception import DetectorConfig, LaneObservation, TfaldaDetector
@@ -41,6 +40,18 @@ from tfalda_sim.vehicle import CarParams
 from tfalda_sim.world import TrackPosition, World
 from tracks import NAMED_TRACKS, GeneratorParams, Track, generate, load_named
 
+from ._checks import (
+    check_bool,
+    check_choice,
+    check_faults,
+    check_int,
+    check_optional,
+    check_options,
+    check_real,
+    check_seed_range,
+    check_triple,
+    show,
+)
 from .observation import lane_vector, lane_vector_bounds
 
 DEFAULT_SPEED_M_S: float = 1.5
@@ -61,6 +72,16 @@ TRACK_SEEDS: tuple[int, int] = (0, 1000)
 RESET_OPTIONS: tuple[str, ...] = ("track", "start", "speed_m_s", "domain_randomization",
                                   "faults")
 """The keys ``reset(options=...)`` accepts."""
+
+DETECTOR_PRESETS: dict[str, Callable[[], DetectorConfig]] = {
+    "thesis": DetectorConfig.thesis,
+    "improved": DetectorConfig.improved,
+    "without_lis": DetectorConfig.without_lis,
+}
+"""The names ``detector=`` accepts for a ``DetectorConfig`` classmethod."""
+
+MAX_TRACK_SEED_HIGH: int = 2**63
+"""Largest ``track_seeds`` high bound (exclusive): the seeds are drawn as int64."""
 
 
 class ObservationMode(Enum):
@@ -95,19 +116,46 @@ def resolve_track(spec: TrackSpec, obstacles: bool) -> Track:
     generated tracks lose their cartons unless ``obstacles``."""
     if isinstance(spec, Track):
         return spec
-    if isinstance(spec, bool) or spec is None:
-        raise TypeError(f"track must be a name, a seed or a Track, got {spec!r}")
+    accepted = (f"a name ({', '.join(NAMED_TRACKS)}), a generator seed (int ≥ 0) or a "
+                "tracks.Track")
     if isinstance(spec, str):
         if spec not in NAMED_TRACKS:
-            raise ValueError(f"unknown track {spec!r}; use one of {', '.join(NAMED_TRACKS)}, "
-                             "a generator seed (int) or a tracks.Track")
+            raise ValueError(f"unknown track {show(spec)}; use {accepted}")
         return load_named(spec)
-    if isinstance(spec, int | np.integer):
+    # bool is an int, but track=True is a mistake, not seed 1.
+    if isinstance(spec, int | np.integer) and not isinstance(spec, bool):
         if spec < 0:
-            raise ValueError(f"track seeds are ≥ 0, got {spec}")
+            raise ValueError(f"track seeds are ≥ 0, got {show(spec)}; use {accepted}")
         track = generate(int(spec), GeneratorParams())
         return track if obstacles else replace(track, obstacles=())
-    raise TypeError(f"track must be a name, a seed or a Track, got {type(spec).__name__}")
+    raise TypeError(f"track must be {accepted}, got {show(spec)}")
+
+
+def resolve_detector(spec: object) -> DetectorConfig:
+    """A ``DetectorConfig``, a name of ``DETECTOR_PRESETS`` or None (the thesis')."""
+    if spec is None:
+        return DetectorConfig.thesis()
+    if isinstance(spec, DetectorConfig):
+        return spec
+    names = ", ".join(map(repr, DETECTOR_PRESETS))
+    if isinstance(spec, str):
+        if spec not in DETECTOR_PRESETS:
+            raise ValueError(f"unknown detector preset {show(spec)}; use one of {names}")
+        return DETECTOR_PRESETS[spec]()
+    raise TypeError(f"detector must be a tfalda_sim.perception.DetectorConfig, a preset name "
+                    f"({names}) or None, got {show(spec)}")
+
+
+@dataclass(frozen=True)
+class _ResetOptions:
+    """``reset``'s options, checked (before any state of the env changes)."""
+
+    track: Track | None  # None: draw a generated track from track_seeds
+    spec: TrackSpec
+    start: tuple[float, float, float] | None
+    speed_m_s: float
+    domain_randomization: bool
+    faults: tuple[Fault, ...]
 
 
 class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
@@ -172,59 +220,71 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
     ## Arguments
     ``render_mode``: ``None`` or ``"rgb_array"`` (the camera frame in colour with ROIs and
     lanes drawn, and a top-down inset). ``observation``: ``"lanes"``, ``"image"`` or
-    ``"dict"``. ``throttle``: add the motor to the action. ``track``: a name
-    (``tracks.NAMED_TRACKS``), a generator seed, a ``Track``, or ``None`` for a new
-    generated track each reset with a seed drawn from ``track_seeds`` (the seed is the
-    scenario id: train/test splits are seed ranges). ``obstacles``: keep the cartons of
-    generated tracks. ``speed_m_s``: cruise speed (also the initial speed with
-    throttle). ``domain_randomization``: draw the photometric effects and the room from
-    ``randomization`` each reset. ``effects``: the effects without randomisation.
-    ``detector``: the TFALDA + LIS configuration (default: the thesis').
-    ``car``: ``CarParams``. ``reward``: ``RewardWeights``. ``max_laps``: 0 = no limit.
-    ``faults``: a default fault schedule for every episode.
+    ``"dict"`` (or an ``ObservationMode``). ``throttle``: add the motor to the action.
+    ``track``: a name (``tracks.NAMED_TRACKS``), a generator seed (int ≥ 0), a ``Track``,
+    or ``None`` for a new generated track each reset with a seed drawn from
+    ``track_seeds``, a pair ``(low, high)`` of ints, ``0 ≤ low < high ≤ 2**63`` (the seed
+    is the scenario id: train/test splits are seed ranges). ``obstacles``: keep the
+    cartons of generated tracks. ``speed_m_s``: cruise speed in ``(0, car.max_speed_m_s]``
+    (also the initial speed with throttle). ``domain_randomization``: draw the
+    photometric effects and the room from ``randomization`` (a ``DomainRandomization``)
+    each reset. ``effects``: the ``Effects`` without randomisation. ``detector``: the
+    TFALDA + LIS configuration, a ``DetectorConfig`` or a preset name: ``"thesis"`` (the
+    default), ``"improved"`` or ``"without_lis"`` (``DetectorConfig``'s classmethods).
+    ``car``: ``CarParams``. ``reward``: ``RewardWeights``. ``max_laps``: an int ≥ 0, 0 =
+    no limit (floats are refused, even 2.0). ``faults``: a default fault schedule for
+    every episode, a list or tuple of ``tfalda_sim.faults`` faults.
+
+    The flags (``throttle``, ``obstacles``, ``domain_randomization``) take only ``bool``
+    or ``numpy.bool_``; numbers take ``int``, ``float`` or numpy scalars, never a bool;
+    ``randomization``, ``effects``, ``detector``, ``car`` and ``reward`` may be ``None``
+    for the default. A wrong type raises ``TypeError``, an impossible value
+    ``ValueError``; the message names the argument and shows what was given. The same
+    holds for ``reset``: ``options`` is ``None`` or a mapping; ``start`` three finite
+    numbers (``None``: random), ``speed_m_s`` in ``[0, car.max_speed_m_s]``, a ``track``
+    of ``None`` draws a generated one.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"],
                                           "render_fps": FRAME_RATE_HZ}
 
-    def __init__(self, render_mode: str | None = None, *, observation: str = "lanes",
+    def __init__(self, render_mode: str | None = None, *,
+                 observation: str | ObservationMode = "lanes",
                  throttle: bool = False, track: TrackSpec = None,
                  track_seeds: tuple[int, int] = TRACK_SEEDS, obstacles: bool = False,
                  speed_m_s: float = DEFAULT_SPEED_M_S, domain_randomization: bool = False,
                  randomization: DomainRandomization | None = None,
-                 effects: Effects | None = None, detector: DetectorConfig | None = None,
+                 effects: Effects | None = None,
+                 detector: DetectorConfig | str | None = None,
                  car: CarParams | None = None, reward: RewardWeights | None = None,
                  max_laps: int = 0, faults: Sequence[Fault] = ()) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"unknown render_mode {render_mode!r}; use None or 'rgb_array'")
-        try:
-            self.observation_mode = ObservationMode(observation)
-        except ValueError:
-            raise ValueError(f"unknown observation {observation!r}; use one of "
-                             f"{', '.join(m.value for m in ObservationMode)}") from None
-        lo, hi = track_seeds
-        if not (isinstance(lo, int) and isinstance(hi, int) and 0 <= lo < hi):
-            raise ValueError(f"track_seeds must be a range (low, high) of ints with "
-                             f"0 ≤ low < high, got {track_seeds}")
-        self.car = car or CarParams()
-        if not (math.isfinite(speed_m_s) and 0 < speed_m_s <= self.car.max_speed_m_s):
-            raise ValueError(f"speed_m_s must be in (0, {self.car.max_speed_m_s}] m/s, got "
-                             f"{speed_m_s}")
-        if max_laps < 0:
-            raise ValueError(f"max_laps must be ≥ 0 (0: no limit), got {max_laps}")
+        if render_mode is not None:
+            check_choice("render_mode", render_mode, self.metadata["render_modes"],
+                         optional=True)
+        self.observation_mode = (
+            observation if isinstance(observation, ObservationMode) else
+            ObservationMode(check_choice("observation", observation,
+                                         [m.value for m in ObservationMode])))
         self.render_mode = render_mode
-        self.throttle = bool(throttle)
+        self.throttle = check_bool("throttle", throttle)
+        self.obstacles = check_bool("obstacles", obstacles)
+        self.domain_randomization = check_bool("domain_randomization", domain_randomization)
+        self.track_seeds = check_seed_range("track_seeds", track_seeds, MAX_TRACK_SEED_HIGH)
+        self.car = check_optional("car", car, CarParams, "a tfalda_sim.vehicle.CarParams"
+                                  ) or CarParams()
+        self.speed_m_s = check_real("speed_m_s", speed_m_s, 0.0, self.car.max_speed_m_s,
+                                    low_open=True, unit=" m/s")
+        self.max_laps = check_int("max_laps", max_laps)
+        self.randomization = check_optional(
+            "randomization", randomization, DomainRandomization,
+            "a tfalda_sim.rendering.DomainRandomization") or DomainRandomization()
+        self.effects = check_optional("effects", effects, Effects,
+                                      "a tfalda_sim.rendering.Effects") or Effects()
+        self.detector_config = resolve_detector(detector)
+        self.reward_weights = check_optional("reward", reward, RewardWeights,
+                                             "an envs.RewardWeights") or RewardWeights()
+        self.default_faults = check_faults("faults", faults)
         self.track_spec = track
-        self.track_seeds = (lo, hi)
-        self.obstacles = bool(obstacles)
-        self.speed_m_s = float(speed_m_s)
-        self.domain_randomization = bool(domain_randomization)
-        self.randomization = randomization or DomainRandomization()
-        self.effects = effects or Effects()
-        self.detector_config = detector or DetectorConfig.thesis()
-        self.reward_weights = reward or RewardWeights()
-        self.max_laps = int(max_laps)
-        self.default_faults = check_schedule(faults)
         if track is not None:
             resolve_track(track, self.obstacles)  # fail early on a bad track
 
@@ -268,26 +328,19 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
     # ------------------------------------------------------------------ reset
     def reset(self, *, seed: int | None = None, options: Mapping[str, Any] | None = None
               ) -> tuple[np.ndarray | dict[str, np.ndarray], dict[str, Any]]:
+        opts = self._check_reset_options(options)  # before the env changes
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = sorted(set(options) - set(RESET_OPTIONS))
-        if unknown:
-            raise ValueError(f"unknown reset option(s) {', '.join(map(repr, unknown))}; "
-                             f"known: {', '.join(RESET_OPTIONS)}")
         rng = self.np_random
-        spec = options.get("track", self.track_spec)
-        if spec is None:
+        spec, track = opts.spec, opts.track
+        if track is None:
             spec = int(rng.integers(*self.track_seeds))
-        track = resolve_track(spec, self.obstacles)
+            track = resolve_track(spec, self.obstacles)
+        if opts.start is not None:
+            self._check_start(track, opts.start)
         self._track_label = spec if isinstance(spec, str | int) else "custom"
-        faults = check_schedule(options.get("faults", self.default_faults))
-        randomize = options.get("domain_randomization", self.domain_randomization)
-        if not isinstance(randomize, bool | np.bool_):
-            raise TypeError(f"domain_randomization must be a bool, got {randomize!r}")
-        speed = float(options.get("speed_m_s", self.speed_m_s))
-        if not (math.isfinite(speed) and 0 <= speed <= self.car.max_speed_m_s):
-            raise ValueError(f"speed_m_s must be in [0, {self.car.max_speed_m_s}] m/s, got "
-                             f"{speed}")
+        faults = opts.faults
+        randomize = opts.domain_randomization
+        speed = opts.speed_m_s
         # Everything random flows from np_random, in a fixed order.
         effects = self.randomization.sample(rng) if randomize else self.effects
         scene_seed = int(rng.integers(2**63)) if randomize else 0
@@ -305,7 +358,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             self._scene_key = key
         self._detector = TfaldaDetector(self.detector_config)
 
-        start = options.get("start")
+        start = opts.start
         pose = self._start_pose(track, start, rng)
         self._world.reset(pose, speed)
         if self._world.collided:
@@ -320,22 +373,45 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         obs = self._observe()
         return obs, self._info(self._position, lis_reset=False)
 
+    def _check_reset_options(self, options: object) -> _ResetOptions:
+        given = check_options(options)
+        unknown = sorted(set(given) - set(RESET_OPTIONS), key=repr)  # keys of any type
+        if unknown:
+            raise ValueError(f"unknown reset option(s) {', '.join(map(show, unknown))}; "
+                             f"known: {', '.join(RESET_OPTIONS)}")
+        spec = given.get("track", self.track_spec)
+        start = given.get("start")
+        return _ResetOptions(
+            track=None if spec is None else resolve_track(spec, self.obstacles),
+            spec=spec,
+            start=None if start is None else check_triple(
+                "start", start, "(s_m, lateral_m, heading_error_rad)"),
+            speed_m_s=check_real("speed_m_s", given.get("speed_m_s", self.speed_m_s), 0.0,
+                                 self.car.max_speed_m_s, unit=" m/s"),
+            domain_randomization=check_bool(
+                "domain_randomization",
+                given.get("domain_randomization", self.domain_randomization)),
+            faults=(check_faults("faults", given["faults"]) if "faults" in given
+                    else self.default_faults))
+
     def _build_scene(self, track: Track, effects: Effects, scene_seed: int) -> Scene:
         return build_scene(track, effects, np.random.default_rng(scene_seed))
 
-    def _start_pose(self, track: Track, start: object, rng: np.random.Generator
-                    ) -> tuple[float, float, float]:
-        if start is not None:
-            try:
-                s_m, lateral_m, heading_rad = (float(v) for v in start)  # type: ignore[union-attr]
-            except (TypeError, ValueError):
-                raise ValueError(f"start must be (s_m, lateral_m, heading_error_rad), got "
-                                 f"{start!r}") from None
-            if not all(math.isfinite(v) for v in (s_m, lateral_m, heading_rad)):
-                raise ValueError(f"start must be finite, got {start!r}")
-            if abs(lateral_m) > track.half_road_m:
-                raise ValueError(f"start lateral_m {lateral_m} is off the road (|lateral| ≤ "
-                                 f"{track.half_road_m:.3f} m)")
+    @staticmethod
+    def _check_start(track: Track, start: tuple[float, float, float]) -> None:
+        """A start on ``track`` (three finite floats already)."""
+        s_m, lateral_m, _ = start
+        if not track.closed and not 0.0 <= s_m <= track.length_m:
+            raise ValueError(f"start s_m {s_m} is off the open track (0 ≤ s_m ≤ "
+                             f"{track.length_m:.3f} m)")
+        if abs(lateral_m) > track.half_road_m:
+            raise ValueError(f"start lateral_m {lateral_m} is off the road (|lateral| ≤ "
+                             f"{track.half_road_m:.3f} m)")
+
+    def _start_pose(self, track: Track, start: tuple[float, float, float] | None,
+                    rng: np.random.Generator) -> tuple[float, float, float]:
+        if start is not None:  # checked by _check_start
+            s_m, lateral_m, heading_rad = start
             x, y, h = (float(v) for v in track.pose(s_m, lateral_m))
             return x, y, h + heading_rad
         centre = -0.5 * track.lane_width_m

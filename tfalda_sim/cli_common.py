@@ -1,25 +1,58 @@
-"""Pieces every ``tfalda-sim`` subcommand shares: the bad-input error and argument types."""
+"""Pieces every ``tfalda-sim`` subcommand shares: exit codes, the bad-input error,
+argument types, the output check and the Ctrl-C message.
+
+Exit codes: 0 success; 1 the command ran and the result is negative (an invalid track,
+laps not completed); 2 bad input (unreadable file, bad option, refused overwrite);
+130 stopped by Ctrl-C (what was finished is kept and named).
+"""
 
 from __future__ import annotations
 
 import argparse
 import math
+import sys
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
+
+from .outputs import DIRECTORY, Output, OutputError
+from .outputs import check_outputs as _check_outputs
+from .parallel import resolve_workers
+from .vehicle import CarParams
+
+EXIT_OK: int = 0
+EXIT_NEGATIVE: int = 1
+EXIT_BAD_INPUT: int = 2
+EXIT_INTERRUPTED: int = 130
+"""128 + SIGINT, the shell's code for a Ctrl-C."""
+
+__all__ = [
+    "DIRECTORY", "EXIT_BAD_INPUT", "EXIT_INTERRUPTED", "EXIT_NEGATIVE", "EXIT_OK", "MAX_SEED",
+    "CliError", "bounded_float_arg", "bounded_int_arg", "check_outputs", "finite_float_arg",
+    "interrupted", "positive_float_arg", "positive_int_arg", "seed_arg", "seed_range_arg",
+    "speed_arg", "workers_arg_value"]
 
 
 class CliError(Exception):
     """Bad input: printed as ``error: …`` with exit code 2."""
 
 
+MAX_SEED: int = 2**63 - 1
+"""Largest seed: seeds reach numpy generators and numba kernels as int64."""
+
+
+def _short(text: str) -> str:
+    return repr(text if len(text) <= 40 else text[:37] + "...")
+
+
 def seed_arg(text: str) -> int:
-    """argparse type: a non-negative integer seed."""
+    """argparse type: a seed, an integer in [0, 2⁶³ − 1]."""
     try:
-        value = int(text)
+        value = int(text) if len(text) <= 30 else -1
     except ValueError:
+        value = -1
+    if not 0 <= value <= MAX_SEED:
         raise argparse.ArgumentTypeError(
-            f"seed must be a non-negative integer, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"seed must be a non-negative integer, got {text!r}")
+            f"seed must be an integer from 0 to {MAX_SEED}, got {_short(text)}")
     return value
 
 
@@ -27,10 +60,10 @@ def seed_range_arg(text: str) -> range:
     """argparse type: ``A:B``, the seeds A, A+1, …, B−1 (Python's slice convention)."""
     parts = text.split(":")
     if len(parts) != 2:
-        raise argparse.ArgumentTypeError(f"seeds must read A:B (e.g. 0:50), got {text!r}")
+        raise argparse.ArgumentTypeError(f"seeds must read A:B (e.g. 0:50), got {_short(text)}")
     a, b = (seed_arg(p) for p in parts)
     if b <= a:
-        raise argparse.ArgumentTypeError(f"seeds A:B needs B > A, got {text!r}")
+        raise argparse.ArgumentTypeError(f"seeds A:B needs B > A, got {_short(text)}")
     return range(a, b)
 
 
@@ -39,10 +72,41 @@ def finite_float_arg(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected a number, got {_short(text)}") from None
     if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {_short(text)}")
     return value
+
+
+def bounded_float_arg(low: float, high: float, unit: str = "", *, low_open: bool = False,
+                      why: str = "") -> Callable[[str], float]:
+    """argparse type: a finite number in [low, high] (``low_open``: (low, high]); ``why``
+    says where the bounds come from."""
+    def parse(text: str) -> float:
+        value = finite_float_arg(text)
+        if value > high or value < low or (low_open and value == low):
+            lo = "(" if low_open else "["
+            raise argparse.ArgumentTypeError(
+                f"expected a number in {lo}{low:g}, {high:g}]{' ' + unit if unit else ''}"
+                f"{f' ({why})' if why else ''}, got {_short(text)}")
+        return value
+    parse.__name__ = "number"
+    return parse
+
+
+def bounded_int_arg(low: int, high: int) -> Callable[[str], int]:
+    """argparse type: an integer in [low, high]."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text) if len(text) <= 30 else None
+        except ValueError:
+            value = None
+        if value is None or not low <= value <= high:
+            raise argparse.ArgumentTypeError(
+                f"expected an integer from {low} to {high}, got {_short(text)}")
+        return value
+    parse.__name__ = "integer"
+    return parse
 
 
 def positive_float_arg(text: str) -> float:
@@ -56,23 +120,50 @@ def positive_float_arg(text: str) -> float:
 def positive_int_arg(text: str) -> int:
     """argparse type: an integer ≥ 1."""
     try:
-        value = int(text)
+        value = int(text) if len(text) <= 30 else None
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        value = None
+    if value is None:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {_short(text)}")
     if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer ≥ 1, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected an integer ≥ 1, got {_short(text)}")
     return value
 
 
-def check_outputs(paths: dict[str, Path | None], suffixes: dict[str, str], force: bool) -> None:
-    """Refuse wrong suffixes, two outputs on one path, and existing files without --force."""
-    given = {k: p for k, p in paths.items() if p is not None}
-    for key, p in given.items():
-        if p.suffix.lower() != suffixes[key]:
-            raise CliError(f"--{key} {p} must end in {suffixes[key]}")
-    resolved = [p.resolve() for p in given.values()]
-    if len(set(resolved)) != len(resolved):
-        raise CliError("two outputs name the same file; give each its own path")
-    existing = [str(p) for p in given.values() if p.exists()]
-    if existing and not force:
-        raise CliError(f"{', '.join(existing)} exists; add --force to overwrite")
+speed_arg = bounded_float_arg(0.0, CarParams().max_speed_m_s, "m/s", low_open=True,
+                              why="the car's top speed")
+"""argparse type of every ``--speed``: a cruise speed the car can drive [m/s]."""
+
+SPEED_HELP = f"cruise speed [m/s], in (0, {CarParams().max_speed_m_s:g}]"
+
+
+def check_outputs(paths: Mapping[str, Path | None], suffixes: Mapping[str, str], force: bool,
+                  *, inputs: Mapping[str, Path | None] | None = None,
+                  files_in: Mapping[str, Iterable[str]] | None = None) -> None:
+    """Check a command's outputs before any work (``tfalda_sim.outputs.check_outputs``):
+    ``paths`` by option name (without ``--``), their ``suffixes`` (``DIRECTORY`` for a
+    folder), ``inputs`` the command reads (never overwritten), ``files_in`` the file names
+    a folder output gets. Raises ``CliError``."""
+    outs = [Output(f"--{k}", p, suffixes[k]) for k, p in paths.items() if p is not None]
+    ins = {f"--{k}" if not k.startswith("-") else k: p for k, p in (inputs or {}).items()
+           if p is not None}
+    try:
+        _check_outputs(outs, force=force, inputs=ins,
+                       files_in={f"--{k}": v for k, v in (files_in or {}).items()})
+    except OutputError as exc:
+        raise CliError(str(exc)) from None
+
+
+def workers_arg_value(requested: int | None, jobs: int | None) -> int:
+    """The workers to start for ``jobs`` jobs (``tfalda_sim.parallel.resolve_workers``);
+    says on stderr when ``--workers`` was capped."""
+    n, why = resolve_workers(requested, jobs)
+    if why:
+        print(f"note: {why}", file=sys.stderr)
+    return n
+
+
+def interrupted(kept: str) -> int:
+    """After a Ctrl-C: one line on stderr saying what was kept; the exit code 130."""
+    print(f"interrupted (Ctrl-C): {kept}", file=sys.stderr)
+    return EXIT_INTERRUPTED

@@ -21,6 +21,18 @@ from .geometry import pose_at
 from .index import GridIndex, build_index, locate_point, locate_points
 from .rules import LANE_WIDTH_M, LINE_WIDTH_M
 
+MAX_TRACK_LENGTH_M: float = 500.0
+"""Longest centre line a track may have [m]. A Carolo-Cup mat is at most tens of metres
+across (generated tracks, seeds 0–999: ≤ 53 m; the named ones: ≤ 42 m), so 500 m is a
+tenfold margin. Everything laid out per metre of road (rule-check samples every 5 cm,
+the spatial index, map pixels) is proportional to it: the limit keeps a hostile track
+from allocating gigabytes."""
+
+MAX_LANE_WIDTH_M: float = 1.0
+"""Widest lane [m]: 2.5 × the rules' ≈ 0.40 m (``validate`` accepts 0.35–0.45 m). The
+spatial index registers every centre-line sample in a square of cells whose area grows
+with the square of the road's width, so an absurd width would allocate without bound."""
+
 
 class Line(Enum):
     """The three longitudinal lines of a road, seen in the driving direction."""
@@ -171,6 +183,7 @@ class Track:
             object.__setattr__(self, name, tuple(getattr(self, name)))
         if not self.segments:
             raise ValueError("a track needs at least one segment")
+        total_m = 0.0
         for i, seg in enumerate(self.segments):
             if isinstance(seg, Straight):
                 _finite_positive(seg.length_m, f"segments[{i}].length_m")
@@ -183,7 +196,17 @@ class Track:
                     )
             else:
                 raise TypeError(f"segments[{i}] must be Straight or Arc, got {type(seg).__name__}")
+            total_m += seg.length_m
+        # Checked here, before anything is laid out per metre of road (samples, index, map).
+        if total_m > MAX_TRACK_LENGTH_M:
+            raise ValueError(
+                f"track too large: its segments add up to {total_m:g} m, more than the largest "
+                f"track length {MAX_TRACK_LENGTH_M:g} m (tracks.model.MAX_TRACK_LENGTH_M)")
         _finite_positive(self.lane_width_m, "lane_width_m")
+        if self.lane_width_m > MAX_LANE_WIDTH_M:
+            raise ValueError(
+                f"lane_width_m {self.lane_width_m:g} m is wider than the widest lane "
+                f"{MAX_LANE_WIDTH_M:g} m (tracks.model.MAX_LANE_WIDTH_M)")
         for v, what in ((self.start.x_m, "start.x_m"), (self.start.y_m, "start.y_m"),
                         (self.start.heading_rad, "start.heading_rad")):
             if not math.isfinite(v):

@@ -1,0 +1,199 @@
+"""A command's output files: checked before any work, written all or none.
+
+Every ``tfalda-sim`` command that writes files follows the same rules:
+
+1. **Checked first.** Before any work, every output is checked (``check_outputs``): the
+   right suffix, not a directory, not one of the command's inputs, two outputs never on
+   one path, its folder creatable and writable (probed by creating and removing a
+   temporary file there: permission bits say nothing to root or on a read-only mount),
+   and an existing file replaced only with ``--force``.
+2. **All or none.** The files are written to temporary names beside their targets
+   (``Outputs.path``) and put in place together by ``Outputs.commit``; an error before the
+   commit removes the temporary files and any folder the command created, so a failed
+   command leaves the disk as it found it.
+3. **Ctrl-C keeps what was finished.** A command interrupted by Ctrl-C commits what it
+   had (the video so far, the results so far) and says so (see ``tfalda_sim.cli``).
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+import tempfile
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+from tracks.fileformat import publish
+
+DIRECTORY = "/"
+"""The ``suffix`` of an output that is a folder (``stress --out DIR``)."""
+
+
+class OutputError(ValueError):
+    """An output that cannot be written as asked: names the option, the path and the fix."""
+
+
+@dataclass(frozen=True)
+class Output:
+    """One output of a command: the option that names it, its path and its suffix
+    (``".png"``; ``DIRECTORY`` for a folder)."""
+
+    option: str
+    path: Path
+    suffix: str
+
+
+def _nearest_existing(path: Path) -> Path:
+    p = path
+    while not p.exists() and p != p.parent:
+        if p.is_symlink():  # a dangling link: its folder is what counts
+            break
+        p = p.parent
+    return p
+
+
+def _probe_writable(folder: Path) -> str | None:
+    """Why ``folder`` cannot take a new file, or None (creates and removes a file)."""
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=".tfalda-sim-probe.", dir=folder)
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    os.close(fd)
+    os.unlink(tmp)
+    return None
+
+
+def _check_folder(option: str, path: Path, folder: Path) -> None:
+    base = _nearest_existing(folder)
+    if not base.is_dir():
+        raise OutputError(f"{option} {path}: {base} is a file, not a folder; choose another "
+                          "path")
+    why = _probe_writable(base)
+    if why is not None:
+        raise OutputError(f"{option} {path}: cannot write in {base} ({why}); choose a "
+                          "writable folder")
+
+
+def _same(a: Path, b: Path) -> bool:
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return a.resolve() == b.resolve()
+
+
+def check_outputs(outputs: Iterable[Output], *, force: bool,
+                  inputs: Mapping[str, Path] | None = None,
+                  files_in: Mapping[str, Iterable[str]] | None = None) -> None:
+    """Refuse outputs that cannot be written as asked, before any work (module rules).
+    ``inputs``: the command's input files by option (an output may not replace one);
+    ``files_in``: for a ``DIRECTORY`` output, the names of the files it will get (each
+    existing one needs ``force``)."""
+    outs = list(outputs)
+    files_in = files_in or {}
+    for out in outs:
+        p = out.path
+        if out.suffix == DIRECTORY:
+            if p.exists() and not p.is_dir():
+                raise OutputError(f"{out.option} {p} is a file; give a folder")
+            _check_folder(out.option, p, p)
+            continue
+        if p.suffix.lower() != out.suffix:
+            raise OutputError(f"{out.option} {p} must end in {out.suffix}")
+        if p.is_dir():
+            raise OutputError(f"{out.option} {p} is a folder; give a {out.suffix} file name")
+        _check_folder(out.option, p, p.parent)
+        if p.exists() and not os.access(p, os.W_OK) and os.geteuid() != 0:
+            raise OutputError(f"{out.option} {p} is read-only; choose another path")
+    targets = [(o.option, o.path) for o in outs if o.suffix != DIRECTORY]
+    targets += [(o.option, o.path / name) for o in outs if o.suffix == DIRECTORY
+                for name in files_in.get(o.option, ())]
+    for i, (opt_a, a) in enumerate(targets):
+        for opt_b, b in targets[i + 1:]:
+            if _same(a, b):
+                raise OutputError(f"{opt_a} and {opt_b} name the same file {a}; give each "
+                                  "its own path")
+        for opt_in, src in (inputs or {}).items():
+            if _same(a, src):
+                raise OutputError(f"{opt_a} {a} is the {opt_in} input; write elsewhere")
+    existing = [str(p) for _, p in targets if p.exists()]
+    if existing and not force:
+        raise OutputError(f"{', '.join(existing)} exists; add --force to overwrite")
+
+
+class Outputs:
+    """Temporary files for a command's outputs, put in place together by ``commit``.
+
+    ``path(target)`` gives the temporary path to write ``target`` to (same folder, same
+    suffix, so writers that go by the suffix — matplotlib, OpenCV — write the right
+    format); folders are created on demand and removed again by ``abort`` if the command
+    created them. Used as a context manager it aborts on any exception; the caller
+    commits explicitly (also after a Ctrl-C it decided to survive)."""
+
+    def __init__(self) -> None:
+        self._staged: dict[Path, Path] = {}
+        self._made_dirs: list[Path] = []
+        self.written: list[Path] = []
+
+    def _makedirs(self, folder: Path) -> None:
+        missing = []
+        p = folder
+        while not p.exists():
+            missing.append(p)
+            p = p.parent
+        for d in reversed(missing):
+            d.mkdir()
+            self._made_dirs.append(d)
+
+    def path(self, target: str | os.PathLike[str]) -> Path:
+        """The temporary path ``target`` is to be written to (one per target)."""
+        target = Path(target)
+        if target in self._staged:
+            return self._staged[target]
+        self._makedirs(target.parent)
+        tmp = target.parent / f".{target.stem}.{secrets.token_hex(4)}.tmp{target.suffix}"
+        self._staged[target] = tmp
+        return tmp
+
+    def commit(self) -> list[Path]:
+        """Put every written temporary file in place; returns the targets written (a
+        target whose temporary file was never created is skipped)."""
+        for target, tmp in self._staged.items():
+            if tmp.exists():
+                publish(tmp, target)
+                self.written.append(target)
+        self._staged.clear()
+        self._made_dirs.clear()
+        return list(self.written)
+
+    def abort(self) -> None:
+        """Remove the temporary files and the folders this command created."""
+        for tmp in self._staged.values():
+            tmp.unlink(missing_ok=True)
+        self._staged.clear()
+        for d in reversed(self._made_dirs):
+            try:
+                d.rmdir()
+            except OSError:  # someone else put a file there meanwhile: keep it
+                pass
+        self._made_dirs.clear()
+
+    def __enter__(self) -> Outputs:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, *_: object) -> None:
+        if exc_type is not None or self._staged:
+            # Anything not committed explicitly is not kept.
+            self.abort()
+
+
+@contextmanager
+def staged(*targets: str | os.PathLike[str] | None) -> Iterator[list[Path | None]]:
+    """Write several files all or none: yields their temporary paths (None stays None)
+    and commits them when the block ends without an exception."""
+    with Outputs() as outs:
+        yield [None if t is None else outs.path(t) for t in targets]
+        outs.commit()
