@@ -53,7 +53,8 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     from .drive import drive, make_agent
 
     check_outputs({"video": args.video, "camera-video": args.camera_video},
-                  {"video": ".mp4", "camera-video": ".mp4"}, args.force)
+                  {"video": ".mp4", "camera-video": ".mp4"}, args.force,
+                  inputs={"policy": args.policy})
     if args.track in NAMED_TRACKS:
         track, label = load_named(args.track), args.track
     elif args.track.isdigit():
@@ -234,4 +235,73 @@ def _cmd_stress(args: argparse.Namespace) -> int:
     if stopped:
         return interrupted(f"kept the {tally.runs} of {jobs} runs that had finished and their "
                            f"summary in {args.out}/ ({written})")
+    return 0
+
+
+def _speeds_arg(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(speed_arg(v.strip()) for v in text.split(","))
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"--speeds: {exc}") from None
+
+
+def add_evaluate_agent_parser(sub: Any) -> None:
+    from .train import TEST_SEEDS
+
+    ev = sub.add_parser(
+        "evaluate-agent", help="laps of an agent on held-out generated tracks (speed sweep)",
+        description="The PID or a PPO policy drives each held-out generated track (cartons "
+                    "removed) from its start line; a run succeeds when the laps are done "
+                    "without a departure. Ctrl-C keeps the runs finished so far.")
+    ev.add_argument("--agent", choices=["pid", "ppo"], default="pid")
+    ev.add_argument("--policy", type=Path, help="PPO policy .zip (default: the committed one)")
+    ev.add_argument("--seeds", type=seed_range_arg, default=range(*TEST_SEEDS),
+                    help=f"held-out seeds A:B (default {TEST_SEEDS[0]}:{TEST_SEEDS[1]})")
+    ev.add_argument("--laps", type=bounded_int_arg(1, 1000), default=3)
+    ev.add_argument("--speeds", type=_speeds_arg, default=(1.5,),
+                    help="comma-separated cruise speeds [m/s], each in (0, top speed]")
+    ev.add_argument("--workers", type=positive_int_arg,
+                    help="processes (default: all CPUs; capped at the runs, CPUs and memory)")
+    ev.add_argument("--out", type=Path, help="also write the JSON here")
+    ev.add_argument("--force", action="store_true", help="overwrite an existing --out")
+    ev.add_argument("--json", action="store_true", help="print one JSON object")
+    ev.set_defaults(func=_cmd_evaluate_agent)
+
+
+def _cmd_evaluate_agent(args: argparse.Namespace) -> int:
+    from tfalda_sim.outputs import staged
+
+    from .drive import make_agent
+    from .evaluate import evaluate
+
+    check_outputs({"out": args.out}, {"out": ".json"}, args.force,
+                  inputs={"policy": args.policy})
+    try:
+        make_agent(args.agent, args.policy)
+    except (ValueError, FileNotFoundError, ImportError) as exc:
+        raise CliError(str(exc)) from None
+    jobs = len(args.seeds) * len(args.speeds)
+    workers = workers_arg_value(args.workers, jobs)
+    result = evaluate(args.agent, args.seeds, laps=args.laps, speeds=args.speeds,
+                      policy=None if args.policy is None else str(args.policy),
+                      workers=workers, progress=not args.json)
+    if not result["runs"]:
+        return interrupted("no run had finished; nothing written")
+    if args.out:
+        with staged(args.out) as (tmp,):
+            tmp.write_text(json.dumps(result, indent=1), encoding="utf-8")
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(f"{args.agent}: {args.laps} laps on seeds {args.seeds.start}:{args.seeds.stop}")
+        print(f"{'speed':>8}{'success':>10}{'mean |e|':>10}{'resets/track':>14}")
+        for r in result["speeds"]:
+            print(f"{r['speed_m_s']:>6.2f} m/s{r['successes']:>5}/{r['tracks']:<4}"
+                  f"{r['mean_abs_cross_track_m'] * 100:>8.1f}cm"
+                  f"{r['lis_resets_per_track']:>12.2f}")
+        if args.out:
+            print(f"wrote {args.out}")
+    if result["interrupted"]:
+        return interrupted(f"kept the {len(result['runs'])} of {jobs} runs that had finished"
+                           + (f" ({args.out})" if args.out else ""))
     return 0

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -20,8 +21,23 @@ from typing import Any
 import cv2
 import numpy as np
 
-from agents.command import add_drive_parser, add_stress_parser, add_train_parser
-from tfalda_sim.cli_common import CliError, check_outputs, finite_float_arg, seed_arg
+from agents.command import (
+    add_drive_parser,
+    add_evaluate_agent_parser,
+    add_stress_parser,
+    add_train_parser,
+)
+from tfalda_sim.cli_common import (
+    EXIT_BAD_INPUT,
+    EXIT_NEGATIVE,
+    EXIT_OK,
+    CliError,
+    check_outputs,
+    finite_float_arg,
+    interrupted,
+    seed_arg,
+)
+from tfalda_sim.outputs import OutputError, Outputs
 from tracks.fileformat import TrackFileError, load_track, save_track
 from tracks.generator import GeneratorParams, generate
 from tracks.model import Track
@@ -72,20 +88,18 @@ def _print_summary(summary: dict[str, Any]) -> None:
 
 
 def _cmd_track_generate(args: argparse.Namespace) -> int:
-    outputs = [p for p in (args.out, args.png) if p is not None]
-    if args.out is not None and args.out.suffix.lower() != ".json":
-        raise CliError(f"--out must name a .json file, got {args.out}")
-    if args.png is not None and args.png.suffix.lower() != ".png":
-        raise CliError(f"--png must name a .png file, got {args.png}")
-    existing = [str(p) for p in outputs if p.exists()]
-    if existing and not args.force:
-        raise CliError(f"{', '.join(existing)} exists; add --force to overwrite")
+    check_outputs({"out": args.out, "png": args.png}, {"out": ".json", "png": ".png"},
+                  args.force)
     track = generate(args.seed, GeneratorParams(difficulty=args.difficulty))
     summary = track_summary(track, validate(track))
-    if args.out:
-        summary["out"] = str(save_track(track, args.out, overwrite=True))
-    if args.png:
-        summary["png"] = str(write_preview(track, args.png, overwrite=True))
+    with Outputs() as outs:  # both files or neither
+        if args.out:
+            save_track(track, outs.path(args.out), overwrite=True)
+            summary["out"] = str(args.out)
+        if args.png:
+            write_preview(track, outs.path(args.png), overwrite=True)
+            summary["png"] = str(args.png)
+        outs.commit()
     _emit(summary, args.json)
     return 0 if summary["valid"] else 1
 
@@ -139,13 +153,11 @@ def _load_track_arg(text: str) -> Track:
                    "a seed (a non-negative integer) nor a .json track file")
 
 
-def _write_png(path: Path, image: np.ndarray) -> str:
+def _write_png(path: Path, image: np.ndarray) -> None:
     ok, buf = cv2.imencode(".png", image)
     if not ok:
         raise CliError(f"could not encode {path}")
-    path.parent.mkdir(parents=True, exist_ok=True)
     path.write_bytes(buf.tobytes())
-    return str(path)
 
 
 def _cmd_render(args: argparse.Namespace) -> int:
@@ -157,8 +169,9 @@ def _cmd_render(args: argparse.Namespace) -> int:
         frame_truth,
     )
 
+    track_file = Path(args.track) if args.track.lower().endswith(".json") else None
     check_outputs({"out": args.out, "truth": args.truth}, {"out": ".png", "truth": ".png"},
-                  args.force)
+                  args.force, inputs={"track": track_file})
     track = _load_track_arg(args.track)
     if not track.closed and not 0.0 <= args.s <= track.length_m:
         raise CliError(f"--s {args.s} m is outside the open track [0, {track.length_m:.2f}] m")
@@ -176,16 +189,20 @@ def _cmd_render(args: argparse.Namespace) -> int:
     summary: dict[str, Any] = {
         "track": track.name, "s_m": args.s, "lateral_m": args.lateral,
         "heading_rad": args.heading, "pose": list(pose), "effects": asdict(effects),
-        "render_ms": render_ms, "out": _write_png(args.out, frame),
+        "render_ms": render_ms, "out": str(args.out),
     }
-    if args.truth is not None:
-        truth = frame_truth(track, renderer.camera, pose, s_hint_m=args.s)
-        picture = truth.colour()
-        for line in (truth.left_boundary_px, truth.right_boundary_px):
-            if len(line) > 1:
-                cv2.polylines(picture, [np.rint(line).astype(np.int32)], False, (0, 255, 0), 1,
-                              cv2.LINE_AA)
-        summary["truth"] = _write_png(args.truth, picture)
+    with Outputs() as outs:  # the frame and the truth picture, or neither
+        _write_png(outs.path(args.out), frame)
+        if args.truth is not None:
+            truth = frame_truth(track, renderer.camera, pose, s_hint_m=args.s)
+            picture = truth.colour()
+            for line in (truth.left_boundary_px, truth.right_boundary_px):
+                if len(line) > 1:
+                    cv2.polylines(picture, [np.rint(line).astype(np.int32)], False,
+                                  (0, 255, 0), 1, cv2.LINE_AA)
+            _write_png(outs.path(args.truth), picture)
+            summary["truth"] = str(args.truth)
+        outs.commit()
     if args.json:
         print(json.dumps(summary))
     else:
@@ -263,17 +280,44 @@ def build_parser() -> argparse.ArgumentParser:
     add_drive_parser(sub)
     add_train_parser(sub)
     add_stress_parser(sub)
+    add_evaluate_agent_parser(sub)
     add_replay_parser(sub)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Run one command and return its exit code (``tfalda_sim.cli_common``); a bad
+    argument is reported with the usage and returns 2 (``--help`` returns 0)."""
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:  # argparse has printed the usage and the error
+        return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
     try:
         return int(args.func(args))
-    except CliError as exc:
+    except (CliError, OutputError) as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
+    except SystemExit as exc:  # a handler's parser.error(): usage and message printed
+        return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        # The long commands catch Ctrl-C themselves and keep what they finished; here
+        # it struck before any result existed.
+        return interrupted("stopped before any result was finished; nothing written")
+    except BrokenPipeError:
+        # stdout closed by its reader (`… | head`): the files are written, stop quietly.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return EXIT_OK
+    except OSError as exc:
+        print(f"error: {exc.strerror or exc}"
+              + (f": {exc.filename}" if exc.filename else ""), file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except Exception as exc:  # a bug: one line, the traceback on demand
+        if os.environ.get("TFALDA_SIM_DEBUG"):
+            raise
+        print(f"internal error: {type(exc).__name__}: {exc} (set TFALDA_SIM_DEBUG=1 for the "
+              "traceback and please report it)", file=sys.stderr)
+        return EXIT_NEGATIVE
 
 
 if __name__ == "__main__":

@@ -22,7 +22,6 @@ import argparse
 import enum
 import json
 import math
-import os
 import sys
 import time
 from pathlib import Path
@@ -187,10 +186,7 @@ def add_replay_parser(sub: Any) -> None:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    if args.out is not None and args.out.exists() and args.video.exists() and \
-            os.path.samefile(args.out, args.video):
-        raise CliError("--out names the video being replayed; give another file")
-    check_outputs({"out": args.out}, {"out": ".mp4"}, args.force)
+    check_outputs({"out": args.out}, {"out": ".mp4"}, args.force, inputs={"video": args.video})
     if args.stages and (args.detector != Detector.HOUGH.value or args.out is None):
         raise CliError("--stages writes the Hough stage view: use it with --detector hough "
                        "and --out F.mp4")

@@ -26,17 +26,16 @@ line segments in image pixels:
 
 from __future__ import annotations
 
-import contextlib
 import os
 import time
-from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from tqdm import tqdm
 
+from ..parallel import resolve_workers, stream
 from ..perception import DetectorConfig, HoughConfig, HoughDetector, LaneObservation
 from ..perception.params import INITIAL_ROIS
 from ..rendering import FrameTruth, Renderer
@@ -237,39 +236,67 @@ def _one(job: tuple[str, int | None, int | None]) -> tuple[str, dict[str, Tally]
     return group, compare_scenario(scenario, renderer=_RENDERER)
 
 
+def compare_jobs(thesis: Sequence[str], seeds: Iterable[int], max_frames: int | None
+                 ) -> Iterator[tuple[str, int | None, int | None]]:
+    """The comparison's jobs, generated as they are needed: the thesis scenarios, then
+    one per generated track (never all in memory: ``seeds`` may be a huge range)."""
+    for kind in thesis:
+        if kind not in ("straight", "curve", "track"):
+            raise ValueError(f"unknown thesis scenario {kind!r}; use straight, curve, track")
+    for kind in thesis:
+        yield kind, None, None
+    for seed in seeds:
+        yield "random", int(seed), max_frames
+
+
+class CompareTally:
+    """The comparison's tallies per scenario group and detector, job by job."""
+
+    def __init__(self) -> None:
+        self.groups: dict[str, dict[str, Tally]] = {}
+        self.jobs = 0
+
+    def add(self, group: str, tallies: Mapping[str, Tally]) -> None:
+        into = self.groups.setdefault(group, {})
+        for label, tally in tallies.items():
+            into[label] = into[label] + tally if label in into else tally
+        self.jobs += 1
+
+    def result(self, thesis: Sequence[str], seeds: Sequence[int],
+               max_frames: int | None) -> dict[str, Any]:
+        seed_span = ([seeds.start, seeds.stop] if isinstance(seeds, range)
+                     else [int(s) for s in seeds])
+        return {
+            "thesis_scenarios": list(thesis), "seeds": seed_span,
+            "max_frames": max_frames, "epsilon_px": EPSILON_PX,
+            "groups": {group: {label: t.summary() for label, t in tallies.items()}
+                       for group, tallies in self.groups.items()},
+        }
+
+
+def iter_compare(thesis: Sequence[str], seeds: Iterable[int], *,
+                 max_frames: int | None = None, workers: int = 1
+                 ) -> Iterator[tuple[str, dict[str, Tally]]]:
+    """(group, tallies) per job, streamed from ``workers`` processes in job order."""
+    yield from stream(_one, compare_jobs(thesis, seeds, max_frames), workers=workers)
+
+
 def compare(thesis: Sequence[str] = ("straight", "curve", "track"),
             seeds: Sequence[int] = range(10000, 10010), *, max_frames: int | None = None,
             workers: int | None = None, progress: bool = False) -> dict[str, Any]:
     """The thesis scenarios (each its own group) and the generated tracks ``seeds`` (one
     lap each, pooled as "generated"), every detector on the same frames."""
-    for kind in thesis:
-        if kind not in ("straight", "curve", "track"):
-            raise ValueError(f"unknown thesis scenario {kind!r}; use straight, curve, track")
-    jobs = [(kind, None, None) for kind in thesis] + [("random", int(s), max_frames)
-                                                     for s in seeds]
+    jobs = len(thesis) + len(seeds)
     if not jobs:
         raise ValueError("nothing to compare: give thesis scenarios or seeds")
-    if workers is None:
-        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
-    with contextlib.ExitStack() as stack:
-        if workers > 1 and len(jobs) > 1:
-            pool = stack.enter_context(ProcessPoolExecutor(max_workers=min(workers, len(jobs))))
-            mapped = pool.map(_one, jobs)
-        else:
-            mapped = map(_one, jobs)
-        results = list(tqdm(mapped, total=len(jobs), desc="scenarios", unit="scenario",
-                            disable=not progress))
-    groups: dict[str, dict[str, Tally]] = {}
-    for group, tallies in results:
-        into = groups.setdefault(group, {})
-        for label, tally in tallies.items():
-            into[label] = into[label] + tally if label in into else tally
-    return {
-        "thesis_scenarios": list(thesis), "seeds": [int(s) for s in seeds],
-        "max_frames": max_frames, "epsilon_px": EPSILON_PX,
-        "groups": {group: {label: t.summary() for label, t in tallies.items()}
-                   for group, tallies in groups.items()},
-    }
+    workers, _ = resolve_workers(workers, jobs)
+    tally = CompareTally()
+    for group, tallies in tqdm(iter_compare(thesis, seeds, max_frames=max_frames,
+                                            workers=workers),
+                               total=jobs, desc="scenarios", unit="scenario",
+                               disable=not progress):
+        tally.add(group, tallies)
+    return tally.result(thesis, seeds, max_frames)
 
 
 def markdown_table(result: Mapping[str, Any]) -> str:

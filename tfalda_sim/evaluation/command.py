@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import os
 import sys
 from collections.abc import Mapping
 from pathlib import Path
@@ -13,15 +12,17 @@ from typing import Any
 
 import numpy as np
 
-from tracks.fileformat import atomic_write
-
 from ..cli_common import (
+    DIRECTORY,
     CliError,
+    bounded_float_arg,
+    bounded_int_arg,
     check_outputs,
-    finite_float_arg,
-    positive_float_arg,
+    interrupted,
     positive_int_arg,
     seed_range_arg,
+    speed_arg,
+    workers_arg_value,
 )
 from ..perception import DetectorConfig, LaneObservation
 from ..rendering import FrameTruth
@@ -41,39 +42,52 @@ PRESETS = {"thesis": DetectorConfig.thesis, "improved": DetectorConfig.improved}
 _SUFFIXES = {"plot": ".png", "xml": ".xml", "jsonl": ".jsonl", "video": ".mp4"}
 
 
+MAX_STRIDE: int = 50
+"""Largest ``--stride``: one frame per second of the drive (50 frames/s); beyond it a lap
+keeps a handful of frames and the LIS's frame-to-frame filters mean nothing."""
+
+MAX_FRAMES: int = 10**7
+"""Largest ``--max-frames`` (60 hours of driving at 50 frames/s)."""
+
+
 def add_evaluate_parser(sub: Any) -> None:
     ev = sub.add_parser(
         "evaluate", help="run the thesis' test system: hit rate with and without the LIS",
         description="Render a scenario, run TFALDA with and without the LIS on every frame "
-                    "and score the lanes against the exact ground truth (thesis ch. 4).")
+                    "and score the lanes against the exact ground truth (thesis ch. 4). "
+                    "Generated tracks stream: --jsonl gets each track's frames as it "
+                    "finishes, and Ctrl-C keeps the tracks finished so far.")
     ev.add_argument("--scenario", required=True, choices=[k.value for k in ScenarioKind],
                     help="the thesis' straight/curve/track drive, or generated tracks")
     ev.add_argument("--seeds", type=seed_range_arg,
                     help="generated tracks A:B (seeds A … B−1) for --scenario random")
-    ev.add_argument("--no-lis", action="store_true",
-                    help="only the run without the LIS (default: with and without)")
-    ev.add_argument("--ablation", action="store_true",
-                    help="run the LIS ablation: each stage off alone and on alone")
+    runs = ev.add_mutually_exclusive_group()
+    runs.add_argument("--no-lis", action="store_true",
+                      help="only the run without the LIS (default: with and without)")
+    runs.add_argument("--ablation", action="store_true",
+                      help="run the LIS ablation: each stage off alone and on alone")
     ev.add_argument("--preset", choices=sorted(PRESETS), default="thesis",
                     help="the configuration of the run with the LIS (default: thesis)")
-    ev.add_argument("--epsilon-px", type=finite_float_arg, default=EPSILON_PX,
+    ev.add_argument("--epsilon-px", type=bounded_float_arg(0.0, 752.0, "px"),
+                    default=EPSILON_PX,
                     help=f"hit distance of the black-box test [px] (default {EPSILON_PX:g})")
-    ev.add_argument("--speed", type=positive_float_arg, default=THESIS_SPEED_M_S,
-                    help=f"car speed [m/s] (default {THESIS_SPEED_M_S:.3f}: 15 km/h)")
-    ev.add_argument("--stride", type=positive_int_arg, default=1,
-                    help=f"use every N-th camera frame ({FRAME_RATE_HZ:g}/s); 2 for the "
-                         "thesis' 30 km/h case")
-    ev.add_argument("--max-frames", type=positive_int_arg,
+    ev.add_argument("--speed", type=speed_arg, default=THESIS_SPEED_M_S,
+                    help=f"car speed [m/s] (default {THESIS_SPEED_M_S:.3f}: 15 km/h; at most "
+                         "the car's top speed)")
+    ev.add_argument("--stride", type=bounded_int_arg(1, MAX_STRIDE), default=1,
+                    help=f"use every N-th camera frame ({FRAME_RATE_HZ:g}/s), 1–{MAX_STRIDE}")
+    ev.add_argument("--max-frames", type=bounded_int_arg(1, MAX_FRAMES),
                     help="random: cut each lap after this many frames")
     ev.add_argument("--workers", type=positive_int_arg,
-                    help="random: processes (default: the CPUs available)")
+                    help="random: processes (default: the CPUs available; capped at the "
+                         "tracks, CPUs and memory)")
     ev.add_argument("--plot", type=Path, help="PNG chart (per frame; random: per track)")
     ev.add_argument("--xml", type=Path, help="lanes per frame, thesis listing 4.1 (one track)")
     ev.add_argument("--jsonl", type=Path, help="every frame of every run as JSON Lines")
     ev.add_argument("--video", type=Path, help="MP4 with ROIs and lanes drawn (one track)")
     ev.add_argument("--force", action="store_true", help="overwrite existing output files")
     ev.add_argument("--json", action="store_true", help="print one JSON object")
-    ev.set_defaults(func=cmd_evaluate)
+    ev.set_defaults(func=cmd_evaluate, parser=ev)
 
 
 def _configs(args: argparse.Namespace) -> dict[str, DetectorConfig]:
@@ -90,16 +104,18 @@ def _configs(args: argparse.Namespace) -> dict[str, DetectorConfig]:
 def _check(args: argparse.Namespace) -> None:
     random = args.scenario == ScenarioKind.RANDOM.value
     if random and args.seeds is None:
-        raise CliError("--scenario random needs --seeds A:B (e.g. --seeds 0:50)")
+        args.parser.error("--scenario random needs --seeds A:B (e.g. --seeds 0:50)")
     if not random:
         for opt, value in (("--seeds", args.seeds), ("--max-frames", args.max_frames),
                            ("--workers", args.workers)):
             if value is not None:
-                raise CliError(f"{opt} only applies to --scenario random")
-    if args.ablation and args.no_lis:
-        raise CliError("--ablation already includes the run without the LIS; drop --no-lis")
-    if not (np.isfinite(args.epsilon_px) and args.epsilon_px >= 0):
-        raise CliError(f"--epsilon-px must be a finite number ≥ 0, got {args.epsilon_px}")
+                args.parser.error(f"{opt} only applies to --scenario random")
+        try:  # the thesis' strips are laid out for its speed: check the drive fits
+            thesis_scenario(ScenarioKind(args.scenario), speed_m_s=args.speed,
+                            stride=args.stride)
+        except ValueError as exc:
+            args.parser.error(f"--speed {args.speed:g} × --stride {args.stride} does not fit "
+                              f"the thesis' {args.scenario} drive: {exc}")
     if random and len(args.seeds) > 1:
         for opt in ("xml", "video"):
             if getattr(args, opt) is not None:
@@ -109,9 +125,7 @@ def _check(args: argparse.Namespace) -> None:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from .charts import plot_ablation, plot_confidence, plot_seeds
-    from .export import write_jsonl, write_lanes_xml
-    from .sweep import pooled_summary, run_seeds
+    from ..outputs import Outputs
 
     _check(args)
     configs = _configs(args)
@@ -120,55 +134,141 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     out: dict[str, Any] = {"scenario": kind.value, "preset": args.preset,
                            "epsilon_px": args.epsilon_px, "speed_m_s": args.speed,
                            "stride": args.stride, "runs": list(configs)}
-    if kind is ScenarioKind.RANDOM and len(args.seeds) > 1:
-        per_seed = run_seeds(args.seeds, configs, workers=args.workers,
-                             epsilon_px=args.epsilon_px, progress=progress,
-                             speed_m_s=args.speed, stride=args.stride,
-                             max_frames=args.max_frames)
-        single = None
-    else:
-        # one track: run it here, so a video records this very run
-        scenario = (generated_scenario(args.seeds.start, speed_m_s=args.speed,
-                                       stride=args.stride, max_frames=args.max_frames)
-                    if kind is ScenarioKind.RANDOM
-                    else thesis_scenario(kind, speed_m_s=args.speed, stride=args.stride))
-        hook, writer = (_video_hook(args.video, _primary_label(configs), args.stride)
-                        if args.video is not None else (None, contextlib.nullcontext()))
-        with writer:  # a failed run discards its video and keeps an existing file
-            single = run_scenario(scenario, configs, epsilon_px=args.epsilon_px,
-                                  progress=progress, on_frame=hook)
-        if args.video is not None:
-            out["video"] = str(args.video)
-        per_seed = [single]
-    if kind is ScenarioKind.RANDOM:
-        out["seeds"] = [args.seeds.start, args.seeds.stop]
-        out["per_seed"] = [run.summary() for runs in per_seed for run in runs.values()]
-        out["pooled"] = {label: pooled_summary([runs[label] for runs in per_seed])
-                         for label in configs}
-    else:
-        out["summary"] = {label: run.summary() for label, run in single.items()}
-    all_runs = [run for runs in per_seed for run in runs.values()]
-    if args.plot is not None:
-        if args.ablation:
-            rows = [{"config": label, **(out["pooled"][label] if "pooled" in out
-                                         else out["summary"][label])} for label in configs]
-            plot_ablation(rows, args.plot, title=f"LIS ablation: {_title(args)}")
-        elif single is not None:
-            plot_confidence(single, args.plot, title=_title(args))
+    with Outputs() as outs:
+        if kind is ScenarioKind.RANDOM and len(args.seeds) > 1:
+            stopped = _evaluate_seeds(args, configs, out, outs, progress)
         else:
-            plot_seeds(out["per_seed"], args.plot, title=_title(args))
-        out["plot"] = str(args.plot)
-    if args.xml is not None and single is not None:
-        write_lanes_xml(single[_primary_label(single)], args.xml)
-        out["xml"] = str(args.xml)
-    if args.jsonl is not None:
-        out["jsonl_lines"] = write_jsonl(all_runs, args.jsonl)
-        out["jsonl"] = str(args.jsonl)
+            stopped = _evaluate_one(args, configs, kind, out, outs, progress)
+        if stopped and "frames_done" not in out and not out.get("per_seed"):
+            outs.abort()
+            return interrupted("no frame had been evaluated; nothing written")
+        outs.commit()
     if args.json:
         print(json.dumps(out))
     else:
         _print_table(out)
+    if stopped:
+        what = (f"kept the {out['tracks_done']} of {len(args.seeds)} tracks that had finished"
+                if "tracks_done" in out else
+                f"kept the {out['frames_done']} frames evaluated so far")
+        files = [out[k] for k in ("plot", "xml", "jsonl", "video") if k in out]
+        return interrupted(what + (f" ({', '.join(files)})" if files else ""))
     return 0
+
+
+def _evaluate_seeds(args: argparse.Namespace, configs: Mapping[str, DetectorConfig],
+                    out: dict[str, Any], outs: Any, progress: bool) -> bool:
+    """A range of generated tracks, streamed: each finished track goes to --jsonl and to
+    the pooled tallies, then is dropped. Returns whether Ctrl-C stopped it."""
+    from tqdm import tqdm
+
+    from .charts import plot_ablation, plot_seeds
+    from .export import frame_records
+    from .sweep import PooledTally, iter_seeds
+
+    workers = workers_arg_value(args.workers, len(args.seeds))
+    tallies = {label: PooledTally() for label in configs}
+    per_seed: list[dict[str, Any]] = []
+    lines = 0
+    stopped = False
+    with contextlib.ExitStack() as stack:
+        fh = (stack.enter_context(open(outs.path(args.jsonl), "w", encoding="utf-8"))
+              if args.jsonl is not None else None)
+        bar = stack.enter_context(tqdm(total=len(args.seeds), desc="tracks", unit="track",
+                                       disable=not progress))
+        results = iter_seeds(args.seeds, configs, workers=workers, epsilon_px=args.epsilon_px,
+                             speed_m_s=args.speed, stride=args.stride,
+                             max_frames=args.max_frames)
+        try:
+            for runs in results:
+                for label, run in runs.items():
+                    tallies[label].add(run)
+                    per_seed.append(run.summary())
+                    if fh is not None:
+                        for rec in frame_records(run):
+                            fh.write(json.dumps(rec, allow_nan=False) + "\n")
+                            lines += 1
+                if fh is not None:
+                    fh.flush()  # a finished track is on disk at once
+                bar.update()
+        except KeyboardInterrupt:
+            stopped = True
+        finally:
+            results.close()
+    out["seeds"] = [args.seeds.start, args.seeds.stop]
+    out["tracks_done"] = len(per_seed) // len(configs)
+    out["interrupted"] = stopped
+    out["per_seed"] = per_seed
+    if not per_seed:
+        return stopped
+    out["pooled"] = {label: t.summary() for label, t in tallies.items()}
+    if args.plot is not None:
+        if args.ablation:
+            rows = [{"config": label, **out["pooled"][label]} for label in configs]
+            plot_ablation(rows, outs.path(args.plot), title=f"LIS ablation: {_title(args)}")
+        else:
+            plot_seeds(per_seed, outs.path(args.plot), title=_title(args))
+        out["plot"] = str(args.plot)
+    if args.jsonl is not None:
+        out["jsonl_lines"] = lines
+        out["jsonl"] = str(args.jsonl)
+    return stopped
+
+
+def _evaluate_one(args: argparse.Namespace, configs: Mapping[str, DetectorConfig],
+                  kind: ScenarioKind, out: dict[str, Any], outs: Any, progress: bool) -> bool:
+    """One track, run in this process (so a video records this very run). Returns
+    whether Ctrl-C stopped it (the frames so far are then reported and written)."""
+    from ..video import VideoWriter
+    from .charts import plot_ablation, plot_confidence
+    from .export import write_jsonl, write_lanes_xml
+    from .runner import ScenarioInterrupted
+    from .sweep import pooled_summary
+
+    scenario = (generated_scenario(args.seeds.start, speed_m_s=args.speed,
+                                   stride=args.stride, max_frames=args.max_frames)
+                if kind is ScenarioKind.RANDOM
+                else thesis_scenario(kind, speed_m_s=args.speed, stride=args.stride))
+    stopped = False
+    with contextlib.ExitStack() as stack:
+        hook = None
+        if args.video is not None:
+            writer = stack.enter_context(VideoWriter(outs.path(args.video),
+                                                     FRAME_RATE_HZ / args.stride))
+            hook = _video_hook(writer, _primary_label(configs))
+        try:
+            single = run_scenario(scenario, configs, epsilon_px=args.epsilon_px,
+                                  progress=progress, on_frame=hook)
+        except ScenarioInterrupted as exc:
+            stopped = True
+            if exc.results is None:
+                return True
+            single = exc.results
+    out["interrupted"] = stopped
+    out["frames_done"] = len(next(iter(single.values())).seq)
+    if args.video is not None:
+        out["video"] = str(args.video)
+    if kind is ScenarioKind.RANDOM:
+        out["seeds"] = [args.seeds.start, args.seeds.stop]
+        out["per_seed"] = [run.summary() for run in single.values()]
+        out["pooled"] = {label: pooled_summary([run]) for label, run in single.items()}
+    else:
+        out["summary"] = {label: run.summary() for label, run in single.items()}
+    if args.plot is not None:
+        if args.ablation:
+            rows = [{"config": label, **(out["pooled"][label] if "pooled" in out
+                                         else out["summary"][label])} for label in configs]
+            plot_ablation(rows, outs.path(args.plot), title=f"LIS ablation: {_title(args)}")
+        else:
+            plot_confidence(single, outs.path(args.plot), title=_title(args))
+        out["plot"] = str(args.plot)
+    if args.xml is not None:
+        write_lanes_xml(single[_primary_label(single)], outs.path(args.xml))
+        out["xml"] = str(args.xml)
+    if args.jsonl is not None:
+        out["jsonl_lines"] = write_jsonl(single.values(), outs.path(args.jsonl))
+        out["jsonl"] = str(args.jsonl)
+    return stopped
 
 
 def _primary_label(configs: Mapping[str, Any]) -> str:
@@ -186,18 +286,15 @@ def _title(args: argparse.Namespace) -> str:
     return f"{what}, {args.speed * 3.6:.0f} km/h (scaled), {frames}"
 
 
-def _video_hook(path: Path, label: str, stride: int) -> tuple[Any, Any]:
+def _video_hook(writer: Any, label: str) -> Any:
     from ..rendering.overlay import draw_observation
-    from ..video import VideoWriter
-
-    writer = VideoWriter(path, FRAME_RATE_HZ / stride)
 
     def hook(seq: int, frame: np.ndarray, truth: FrameTruth,
              observations: Mapping[str, LaneObservation]) -> None:
         writer.write(draw_observation(frame, observations[label], truth=truth,
                                       text=f"seq {seq} {label}"))
 
-    return hook, writer
+    return hook
 
 
 def _print_table(out: dict[str, Any]) -> None:
@@ -218,8 +315,10 @@ def _print_table(out: dict[str, Any]) -> None:
             print(f"wrote {out[key]}")
 
 
-COMPARE_FILES = {"json": "compare.json", "md": "compare.md", "png": "compare.png"}
-"""What ``tfalda-sim compare --out DIR`` writes into DIR."""
+COMPARE_FILES = {"jsonl": "compare.jsonl", "json": "compare.json", "md": "compare.md",
+                 "png": "compare.png"}
+"""What ``tfalda-sim compare --out DIR`` writes into DIR: each scenario's figures as it
+finishes (JSON Lines), the pooled result (JSON, Markdown) and its chart."""
 
 
 def _thesis_list(text: str) -> tuple[str, ...]:
@@ -227,7 +326,7 @@ def _thesis_list(text: str) -> tuple[str, ...]:
     bad = [k for k in kinds if k not in ("straight", "curve", "track")]
     if bad or not kinds:
         raise argparse.ArgumentTypeError(
-            f"--thesis takes straight, curve and/or track, comma-separated; got {text!r}")
+            f"--thesis takes straight, curve and/or track, comma-separated; got {text[:60]!r}")
     return kinds
 
 
@@ -238,60 +337,94 @@ def add_compare_parser(sub: Any) -> None:
                     "baseline (seed values and simulator preset) and TFALDA with and "
                     "without the LIS on every frame, and score all of them against the "
                     "same ground truth: hit rate, false positives, ego lines found, ms "
-                    "per frame (tfalda_sim/evaluation/baseline.py).")
-    cp.add_argument("--thesis", type=_thesis_list, default=("straight", "curve", "track"),
-                    help="thesis scenarios, comma-separated (default: straight,curve,track)")
-    cp.add_argument("--no-thesis", action="store_true", help="generated tracks only")
-    cp.add_argument("--seeds", type=seed_range_arg, default=range(10000, 10010),
-                    help="generated tracks A:B, one lap each (default 10000:10010, held out)")
-    cp.add_argument("--no-generated", action="store_true", help="thesis scenarios only")
-    cp.add_argument("--max-frames", type=positive_int_arg,
+                    "per frame (tfalda_sim/evaluation/baseline.py). Scenarios stream to "
+                    "OUT/compare.jsonl as they finish; Ctrl-C keeps the finished ones.")
+    thesis = cp.add_mutually_exclusive_group()
+    thesis.add_argument("--thesis", type=_thesis_list, default=("straight", "curve", "track"),
+                        help="thesis scenarios, comma-separated (default: straight,curve,track)")
+    thesis.add_argument("--no-thesis", action="store_true", help="generated tracks only")
+    generated = cp.add_mutually_exclusive_group()
+    generated.add_argument("--seeds", type=seed_range_arg, default=range(10000, 10010),
+                           help="generated tracks A:B, one lap each (default 10000:10010, "
+                                "held out)")
+    generated.add_argument("--no-generated", action="store_true",
+                           help="thesis scenarios only")
+    cp.add_argument("--max-frames", type=bounded_int_arg(1, MAX_FRAMES),
                     help="cut each generated lap after this many frames")
     cp.add_argument("--workers", type=positive_int_arg,
-                    help="processes (default: the CPUs available)")
+                    help="processes (default: the CPUs available; capped at the scenarios, "
+                         "CPUs and memory)")
     cp.add_argument("--out", type=Path,
-                    help="write compare.json, compare.md and compare.png into this directory")
+                    help="write compare.jsonl, compare.json, compare.md and compare.png into "
+                         "this folder")
     cp.add_argument("--force", action="store_true", help="overwrite existing output files")
     cp.add_argument("--json", action="store_true", help="print one JSON object")
-    cp.set_defaults(func=cmd_compare)
+    cp.set_defaults(func=cmd_compare, parser=cp)
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    from .baseline import compare, markdown_table, plot
+    from tqdm import tqdm
+
+    from ..outputs import Outputs
+    from .baseline import CompareTally, iter_compare, markdown_table, plot
 
     thesis = () if args.no_thesis else args.thesis
     seeds = range(0) if args.no_generated else args.seeds
     if not thesis and not len(seeds):
-        raise CliError("--no-thesis and --no-generated leave nothing to compare")
+        args.parser.error("--no-thesis and --no-generated leave nothing to compare")
+    if args.max_frames is not None and args.no_generated:
+        args.parser.error("--max-frames cuts generated laps; --no-generated runs none")
     if args.out is not None:  # checked before minutes of work, not after
-        if args.out.exists() and not args.out.is_dir():
-            raise CliError(f"--out {args.out} is a file; give a directory")
-        existing = [str(args.out / f) for f in COMPARE_FILES.values()
-                    if (args.out / f).exists()]
-        if existing and not args.force:
-            raise CliError(f"{', '.join(existing)} exists; add --force to overwrite")
+        check_outputs({"out": args.out}, {"out": DIRECTORY}, args.force,
+                      files_in={"out": COMPARE_FILES.values()})
+    jobs = len(thesis) + len(seeds)
+    workers = workers_arg_value(args.workers, jobs)
+    progress = sys.stderr.isatty() or not args.json
+    tally = CompareTally()
+    stopped = False
+    with Outputs() as outs, contextlib.ExitStack() as stack:
+        files = ({k: outs.path(args.out / f) for k, f in COMPARE_FILES.items()}
+                 if args.out is not None else None)
+        fh = (stack.enter_context(open(files["jsonl"], "w", encoding="utf-8"))
+              if files is not None else None)
+        bar = stack.enter_context(tqdm(total=jobs, desc="scenarios", unit="scenario",
+                                       disable=not progress))
+        results = iter_compare(thesis, seeds, max_frames=args.max_frames, workers=workers)
+        job_names = iter([*thesis, *(f"seed {s}" for s in seeds)])
         try:
-            args.out.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise CliError(f"cannot create --out {args.out}: {exc.strerror}") from None
-        if not os.access(args.out, os.W_OK):
-            raise CliError(f"--out {args.out} is not writable; choose another directory")
-    result = compare(thesis, seeds, max_frames=args.max_frames, workers=args.workers,
-                     progress=sys.stderr.isatty() or not args.json)
-    table = markdown_table(result)
-    if args.out is not None:
-        # Each file is written to a temporary name and moved into place: an interrupted
-        # or failed write leaves the previous report as it was.
-        with atomic_write(args.out / COMPARE_FILES["json"]) as fh:
-            fh.write(json.dumps(result, indent=1))
-        with atomic_write(args.out / COMPARE_FILES["md"]) as fh:
-            fh.write(table)
-        plot(result, args.out / COMPARE_FILES["png"])
-        result["out"] = {k: str(args.out / f) for k, f in COMPARE_FILES.items()}
+            for group, tallies in results:
+                tally.add(group, tallies)
+                if fh is not None:
+                    fh.write(json.dumps({"scenario": next(job_names), "group": group,
+                                         "detectors": {k: t.summary()
+                                                       for k, t in tallies.items()}}) + "\n")
+                    fh.flush()  # a finished scenario is on disk at once
+                bar.update()
+        except KeyboardInterrupt:
+            stopped = True
+        finally:
+            results.close()
+        stack.close()
+        if not tally.jobs:
+            outs.abort()
+            return interrupted("no scenario had finished; nothing written")
+        result = tally.result(thesis, seeds, args.max_frames)
+        result.update(scenarios_done=tally.jobs, scenarios=jobs, interrupted=stopped)
+        table = markdown_table(result)
+        if files is not None:
+            files["json"].write_text(json.dumps(result, indent=1), encoding="utf-8")
+            files["md"].write_text(table, encoding="utf-8")
+            plot(result, files["png"])
+            result["out"] = {k: str(args.out / f) for k, f in COMPARE_FILES.items()}
+        outs.commit()
     if args.json:
         print(json.dumps(result))
     else:
         print(table, end="")
         if args.out is not None:
             print(f"wrote {', '.join(result['out'].values())}")
+    if stopped:
+        where = f" in {args.out}/ ({', '.join(COMPARE_FILES.values())})" if args.out else ""
+        return interrupted(f"kept the {tally.jobs} of {jobs} scenarios that had finished"
+                           + where)
     return 0

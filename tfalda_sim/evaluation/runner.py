@@ -83,6 +83,15 @@ class RunResult:
         }
 
 
+class ScenarioInterrupted(KeyboardInterrupt):
+    """A Ctrl-C during ``run_scenario``: carries the runs over the frames finished so far
+    (``results``; None if not even one frame was), so that a command can keep them."""
+
+    def __init__(self, results: dict[str, RunResult] | None) -> None:
+        super().__init__("interrupted")
+        self.results = results
+
+
 FrameHook = Callable[[int, np.ndarray, FrameTruth, Mapping[str, LaneObservation]], None]
 """Called per frame with (seq, frame, truth, observation per run label): e.g. a video."""
 
@@ -108,37 +117,60 @@ def run_scenario(scenario: Scenario, configs: Mapping[str, DetectorConfig], *,
     records: dict[str, list[tuple[LaneObservation, Any, float]]] = {k: [] for k in detectors}
     frames = tqdm(range(len(traj)), desc=scenario.name, unit="frame", disable=not progress,
                   leave=False)
-    for k in frames:
-        seq = scenario.first_seq + k
-        pose = traj.pose(k)
-        s_hint = float(traj.s_m[k]) if np.isfinite(traj.s_m[k]) else None
-        frame = renderer.render(scene, pose, speed_m_s=float(traj.speeds_m_s[k]),
-                                frame_seed=seq + 1_000_003 * scenario.scene_seed)
-        truth = frame_truth(scenario.track, renderer.camera, pose, bonnet=renderer.bonnet,
-                            s_hint_m=s_hint)
-        distance = truth_distance(truth.labels)
-        observations = {}
-        for label, det in detectors.items():
-            t0 = time.perf_counter()
-            obs = det.process(frame)
-            dt = time.perf_counter() - t0
-            score = score_frame(obs.lanes, obs.rois, truth, distance, epsilon_px=epsilon_px)
-            records[label].append((obs, score, dt))
-            observations[label] = obs
-        if on_frame is not None:
-            on_frame(seq, frame, truth, observations)
+    try:
+        for k in frames:
+            _run_frame(k, scenario, renderer, scene, detectors, records, epsilon_px, on_frame)
+    except KeyboardInterrupt:
+        done = min(len(r) for r in records.values())
+        partial = None
+        if done:
+            partial = {label: _collect(label, scenario, configs[label], epsilon_px,
+                                       recs[:done], frames=done)
+                       for label, recs in records.items()}
+        raise ScenarioInterrupted(partial) from None
+    finally:
+        frames.close()
     return {label: _collect(label, scenario, configs[label], epsilon_px, recs)
             for label, recs in records.items()}
 
 
+def _run_frame(k: int, scenario: Scenario, renderer: Renderer, scene: Any,
+               detectors: Mapping[str, TfaldaDetector],
+               records: dict[str, list[tuple[LaneObservation, Any, float]]],
+               epsilon_px: float, on_frame: FrameHook | None) -> None:
+    """Frame ``k``: render, truth, every detector, the hook."""
+    seq = scenario.first_seq + k
+    traj = scenario.trajectory
+    pose = traj.pose(k)
+    s_hint = float(traj.s_m[k]) if np.isfinite(traj.s_m[k]) else None
+    frame = renderer.render(scene, pose, speed_m_s=float(traj.speeds_m_s[k]),
+                            frame_seed=seq + 1_000_003 * scenario.scene_seed)
+    truth = frame_truth(scenario.track, renderer.camera, pose, bonnet=renderer.bonnet,
+                        s_hint_m=s_hint)
+    distance = truth_distance(truth.labels)
+    observations = {}
+    for label, det in detectors.items():
+        t0 = time.perf_counter()
+        obs = det.process(frame)
+        dt = time.perf_counter() - t0
+        score = score_frame(obs.lanes, obs.rois, truth, distance, epsilon_px=epsilon_px)
+        records[label].append((obs, score, dt))
+        observations[label] = obs
+    if on_frame is not None:
+        on_frame(seq, frame, truth, observations)
+
+
 def _collect(label: str, scenario: Scenario, config: DetectorConfig, epsilon_px: float,
-             recs: list[tuple[LaneObservation, Any, float]]) -> RunResult:
+             recs: list[tuple[LaneObservation, Any, float]], frames: int | None = None
+             ) -> RunResult:
+    """The run of ``recs``; ``frames``: only the first frames of the scenario were run."""
     obs = [r[0] for r in recs]
     sc = [r[1] for r in recs]
+    n = len(scenario.trajectory) if frames is None else frames
     return RunResult(
         label=label, scenario=scenario.name, seed=scenario.seed, config=config,
         epsilon_px=epsilon_px,
-        seq=np.array(list(scenario.seqs)), time_s=scenario.trajectory.times_s.copy(),
+        seq=np.array(list(scenario.seqs))[:n], time_s=scenario.trajectory.times_s[:n].copy(),
         lanes=np.stack([o.lanes for o in obs]), d=np.stack([o.d for o in obs]),
         lam=np.stack([o.lam for o in obs]), rois=np.stack([o.rois for o in obs]),
         hit_rates=np.stack([s.hit_rates for s in sc]),

@@ -3,9 +3,8 @@ and the ablation of the LIS stages."""
 
 from __future__ import annotations
 
-import os
-from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor
+import math
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import replace
 from functools import partial
 from typing import Any
@@ -13,6 +12,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from ..parallel import resolve_workers, stream
 from ..perception import DetectorConfig, LisConfig
 from ..rendering import Renderer
 from .metrics import EPSILON_PX
@@ -55,60 +55,87 @@ def _one_seed(seed: int, configs: Mapping[str, DetectorConfig], epsilon_px: floa
     return run_scenario(scenario, configs, renderer=_RENDERER, epsilon_px=epsilon_px)
 
 
-def run_seeds(seeds: Sequence[int], configs: Mapping[str, DetectorConfig], *,
-              workers: int | None = None, epsilon_px: float = EPSILON_PX,
-              progress: bool = False, **scenario_kwargs: Any) -> list[dict[str, RunResult]]:
+def iter_seeds(seeds: Iterable[int], configs: Mapping[str, DetectorConfig], *,
+               workers: int = 1, epsilon_px: float = EPSILON_PX,
+               **scenario_kwargs: Any) -> Iterator[dict[str, RunResult]]:
     """Every configuration on each generated track of ``seeds`` (one lap, see
-    ``generated_scenario`` for ``scenario_kwargs``), in ``workers`` processes (default:
-    the CPUs this process may use). Results come back in seed order and do not depend on
-    the number of workers."""
-    seeds = [int(s) for s in seeds]
-    if not seeds:
-        raise ValueError("no seeds given")
-    if workers is None:
-        workers = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else 1
+    ``generated_scenario`` for ``scenario_kwargs``), streamed from ``workers`` processes
+    (``tfalda_sim.parallel.stream``: bounded memory for any range). Results come in seed
+    order and do not depend on the number of workers."""
     if workers < 1:
         raise ValueError(f"workers must be ≥ 1, got {workers}")
     job = partial(_one_seed, configs=dict(configs), epsilon_px=epsilon_px,
                   scenario_kwargs=scenario_kwargs)
-    bar = tqdm(total=len(seeds), desc="tracks", unit="track", disable=not progress)
-    try:
-        if workers == 1 or len(seeds) == 1:
-            results = []
-            for seed in seeds:
-                results.append(job(seed))
-                bar.update()
-            return results
-        with ProcessPoolExecutor(max_workers=min(workers, len(seeds))) as pool:
-            results = []
-            for res in pool.map(job, seeds):
-                results.append(res)
-                bar.update()
-            return results
-    finally:
-        bar.close()
+    yield from stream(job, (int(s) for s in seeds), workers=workers)
 
 
-def pooled_summary(runs: Sequence[RunResult]) -> dict[str, Any]:
-    """One configuration's figures over many tracks: frames pooled, resets summed."""
-    conf = np.concatenate([r.confidence for r in runs])
-    means = np.array([r.confidence.mean() for r in runs])
-    summaries = [r.summary() for r in runs]
-    acc = np.concatenate([r.accuracy[r.truth_present] for r in runs])
-    given = sum(int(np.all(np.isfinite(r.lanes), axis=2).sum()) for r in runs)
-    n_truth = sum(int(r.truth_present.sum()) for r in runs)
-    return {
-        "tracks": len(runs), "frames": int(len(conf)),
-        "mean_confidence": float(conf.mean()),
-        "worst_track_mean_confidence": float(means.min()),
-        "min_confidence": float(conf.min()),
-        "frames_below_0_75": int((conf < LOW_CONFIDENCE).sum()),
-        "share_below_0_75": float((conf < LOW_CONFIDENCE).mean()),
-        "resets": int(sum(s["resets"] for s in summaries)),
-        "tracks_with_reset": int(sum(s["resets"] > 0 for s in summaries)),
-        "tusimple_accuracy": float(acc.mean()) if len(acc) else None,
-        "false_positive_rate": float(sum(int(r.false_positive.sum()) for r in runs)
-                                     / max(1, given)),
-        "false_negative_rate": float(sum(int(r.false_negative.sum()) for r in runs)
-                                     / max(1, n_truth)),
-    }
+def run_seeds(seeds: Sequence[int], configs: Mapping[str, DetectorConfig], *,
+              workers: int | None = None, epsilon_px: float = EPSILON_PX,
+              progress: bool = False, **scenario_kwargs: Any) -> list[dict[str, RunResult]]:
+    """``iter_seeds`` collected into a list (for short ranges), with a progress bar;
+    ``workers`` defaults to the CPUs available (capped at the seeds)."""
+    if not len(seeds):
+        raise ValueError("no seeds given")
+    if workers is not None and workers < 1:
+        raise ValueError(f"workers must be ≥ 1, got {workers}")
+    workers, _ = resolve_workers(workers, len(seeds))
+    results = iter_seeds(seeds, configs, workers=workers, epsilon_px=epsilon_px,
+                         **scenario_kwargs)
+    return list(tqdm(results, total=len(seeds), desc="tracks", unit="track",
+                     disable=not progress))
+
+
+class PooledTally:
+    """One configuration's figures over many tracks, updated track by track (memory
+    independent of the number of tracks): frames pooled, resets summed."""
+
+    def __init__(self) -> None:
+        self.tracks = self.frames = self.below = self.resets = self.tracks_with_reset = 0
+        self.conf_sum = 0.0
+        self.min_conf = self.worst_track_mean = math.inf
+        self.acc_sum, self.acc_n = 0.0, 0
+        self.given = self.n_truth = self.fp = self.fn = 0
+
+    def add(self, run: RunResult) -> None:
+        conf = run.confidence
+        self.tracks += 1
+        self.frames += len(conf)
+        self.conf_sum += float(conf.sum())
+        self.min_conf = min(self.min_conf, float(conf.min()))
+        self.worst_track_mean = min(self.worst_track_mean, float(conf.mean()))
+        self.below += int((conf < LOW_CONFIDENCE).sum())
+        resets = int(run.reset.sum())
+        self.resets += resets
+        self.tracks_with_reset += resets > 0
+        acc = run.accuracy[run.truth_present]
+        self.acc_sum += float(acc.sum())
+        self.acc_n += len(acc)
+        self.given += int(np.all(np.isfinite(run.lanes), axis=2).sum())
+        self.n_truth += int(run.truth_present.sum())
+        self.fp += int(run.false_positive.sum())
+        self.fn += int(run.false_negative.sum())
+
+    def summary(self) -> dict[str, Any]:
+        if not self.frames:
+            raise ValueError("no track added yet")
+        return {
+            "tracks": self.tracks, "frames": self.frames,
+            "mean_confidence": self.conf_sum / self.frames,
+            "worst_track_mean_confidence": self.worst_track_mean,
+            "min_confidence": self.min_conf,
+            "frames_below_0_75": self.below,
+            "share_below_0_75": self.below / self.frames,
+            "resets": self.resets,
+            "tracks_with_reset": self.tracks_with_reset,
+            "tusimple_accuracy": self.acc_sum / self.acc_n if self.acc_n else None,
+            "false_positive_rate": self.fp / max(1, self.given),
+            "false_negative_rate": self.fn / max(1, self.n_truth),
+        }
+
+
+def pooled_summary(runs: Iterable[RunResult]) -> dict[str, Any]:
+    """One configuration's figures over many tracks (``PooledTally``)."""
+    tally = PooledTally()
+    for run in runs:
+        tally.add(run)
+    return tally.summary()
