@@ -88,7 +88,24 @@ def _progress_callback(total: int) -> Any:
         def _on_training_end(self) -> None:
             self.bar.close()
 
+        def close(self) -> None:
+            """Close the bar also when the training ended early (Ctrl-C)."""
+            if hasattr(self, "bar"):
+                self.bar.close()
+
     return TqdmCallback()
+
+
+def _stop_workers(venv: Any) -> None:
+    """End a vector env after a Ctrl-C or an error without its polite close(): a Ctrl-C
+    can cut a pipe message in half, and close() would then wait forever for the rest."""
+    for proc in getattr(venv, "processes", ()):
+        proc.terminate()
+    for proc in getattr(venv, "processes", ()):
+        proc.join(timeout=10)
+    if not getattr(venv, "processes", None):
+        venv.close()  # DummyVecEnv: nothing to cut, close it normally
+    venv.closed = True
 
 
 def _publish_run(staging: Path, out: Path) -> None:
@@ -141,18 +158,26 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
                         tensorboard_log=str(staging / "tb"))
             callbacks = [CheckpointCallback(max(1, 100_000 // n_envs),
                                             str(staging / "checkpoints"), name_prefix="ppo")]
+            bar = None
             if progress:  # PPO learns in whole rollouts of n_steps per env
                 rollout = cfg.n_steps * n_envs
-                callbacks.append(_progress_callback(-(-timesteps // rollout) * rollout))
+                bar = _progress_callback(-(-timesteps // rollout) * rollout)
+                callbacks.append(bar)
             t0 = time.perf_counter()
             try:
                 model.learn(timesteps, callback=CallbackList(callbacks))
             except KeyboardInterrupt:
                 interrupted = True  # keep the policy so far
+            finally:
+                if bar is not None:
+                    bar.close()
             elapsed = time.perf_counter() - t0
             model.save(staging / "policy.zip")
         finally:
-            venv.close()
+            if interrupted or sys.exc_info()[0] is not None:
+                _stop_workers(venv)
+            else:
+                venv.close()
         summary = _summary(timesteps, n_envs, seed, speed_m_s, track, cfg, elapsed, out)
         summary.update(interrupted=interrupted, timesteps_done=int(model.num_timesteps))
         (staging / "train.json").write_text(json.dumps(summary, indent=2))

@@ -94,15 +94,19 @@ def _init_worker(parent_pid: int) -> None:
 
 
 def _terminate(pool: ProcessPoolExecutor) -> None:
-    """Stop the workers now (an interrupted sweep does not wait for running jobs)."""
+    """Stop the workers now: an interrupted sweep does not wait for running jobs."""
     terminate = getattr(pool, "terminate_workers", None)  # Python ≥ 3.14
     if terminate is not None:
         terminate()
         return
-    for proc in list(getattr(pool, "_processes", {}).values()):
+    # The private process table is the only handle before 3.14; shutdown() drops it, so
+    # take it first.
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for proc in procs:
         with contextlib.suppress(Exception):
             proc.terminate()
-    for proc in list(getattr(pool, "_processes", {}).values()):
+    for proc in procs:
         with contextlib.suppress(Exception):
             proc.join(timeout=5)
 
@@ -139,5 +143,4 @@ def stream(fn: Callable[[J], R], jobs: Iterable[J], *, workers: int = 1) -> Iter
         if finished:
             pool.shutdown(wait=True)
         else:
-            pool.shutdown(wait=False, cancel_futures=True)
             _terminate(pool)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import itertools
 import json
 import sys
 from collections.abc import Mapping
@@ -390,7 +391,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
         bar = stack.enter_context(tqdm(total=jobs, desc="scenarios", unit="scenario",
                                        disable=not progress))
         results = iter_compare(thesis, seeds, max_frames=args.max_frames, workers=workers)
-        job_names = iter([*thesis, *(f"seed {s}" for s in seeds)])
+        job_names = itertools.chain(thesis, (f"seed {s}" for s in seeds))  # lazily
         try:
             for group, tallies in results:
                 tally.add(group, tallies)

@@ -1,0 +1,169 @@
+"""The streaming process pool: results in job order, jobs pulled lazily, workers capped,
+deaf to Ctrl-C and dead with their parent."""
+
+from __future__ import annotations
+
+import itertools
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from tfalda_sim import parallel
+from tfalda_sim.parallel import IN_FLIGHT_PER_WORKER, resolve_workers, stream
+
+
+def square(x: int) -> int:
+    return x * x
+
+
+def slow_square(x: int) -> int:
+    time.sleep(0.05 * (x % 3))  # finishing out of order in the pool
+    return x * x
+
+
+def fail_on_three(x: int) -> int:
+    if x == 3:
+        raise ValueError("job 3 failed")
+    return x
+
+
+def _children(pid: int) -> set[int]:
+    kids: set[int] = set()
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        text = (task / "children").read_text().split()
+        kids.update(int(t) for t in text)
+    return kids
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_results_come_in_job_order(workers: int) -> None:
+    assert list(stream(slow_square, range(12), workers=workers)) == [x * x for x in range(12)]
+
+
+def test_jobs_are_pulled_lazily_from_an_endless_range() -> None:
+    pulled = 0
+
+    def jobs() -> Iterator[int]:
+        nonlocal pulled
+        for x in itertools.count():
+            pulled += 1
+            yield x
+
+    results = stream(square, jobs(), workers=2)
+    first = [next(results) for _ in range(3)]
+    results.close()
+    assert first == [0, 1, 4]
+    # Never more than the window ahead of what was consumed.
+    assert pulled <= 3 + 2 * IN_FLIGHT_PER_WORKER
+    # A range of 10**8 seeds is never materialised either.
+    big = stream(square, range(10**8), workers=2)
+    assert next(big) == 0
+    big.close()
+
+
+def test_closing_early_or_an_error_leaves_no_worker_running() -> None:
+    me = os.getpid()
+    results = stream(slow_square, range(1000), workers=2)
+    next(results)
+    assert len(_children(me)) >= 2
+    results.close()
+    with pytest.raises(ValueError, match="job 3 failed"):
+        list(stream(fail_on_three, range(100), workers=2))
+    deadline = time.monotonic() + 10
+    while _children(me) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not _children(me)
+
+
+def test_workers_are_capped_at_jobs_cpus_and_memory(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(parallel, "available_cpus", lambda: 4)
+    monkeypatch.setattr(parallel, "available_memory_bytes", lambda: 100 * 2**30)
+    assert resolve_workers(None, None) == (4, None)
+    n, why = resolve_workers(100_000, 10)
+    assert n == 4 and why is not None and "--workers 100000 capped to 4" in why
+    assert "CPU" in why
+    assert resolve_workers(3, 1) == (1, "--workers 3 capped to 1: 1 job(s)")
+    monkeypatch.setattr(parallel, "available_memory_bytes",
+                        lambda: 2 * parallel.WORKER_MEMORY_BYTES)
+    n, why = resolve_workers(4, None)
+    assert n == 2 and why is not None and "memory" in why
+    with pytest.raises(ValueError, match="workers must be ≥ 1"):
+        resolve_workers(0, 5)
+
+
+def test_stress_says_when_it_caps_the_workers(monkeypatch: pytest.MonkeyPatch, tmp_path: Path,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    """The issue's reproduction: --workers 100000 for one seed started ~4,900 processes."""
+    from tfalda_sim.cli import main
+
+    seen = {}
+
+    def fake_battery(seeds: range, faults: list[str], *, workers: int) -> Iterator[object]:
+        seen["workers"] = workers
+        return iter(())
+
+    monkeypatch.setattr("agents.stress.iter_battery", fake_battery)
+    main(["stress", "--seeds", "10000:10001", "--faults", "none", "--workers", "100000",
+          "--out", str(tmp_path / "s")])
+    err = capsys.readouterr().err
+    assert seen["workers"] <= max(2, parallel.available_cpus())
+    assert "--workers 100000 capped to" in err
+
+
+WORKER_SCRIPT = textwrap.dedent("""
+    import sys, time
+    from tfalda_sim.parallel import stream
+
+    def nap(x):
+        time.sleep(60)
+        return x
+
+    if __name__ == "__main__":
+        for r in stream(nap, range(100), workers=2):
+            pass
+""")
+
+
+def test_workers_ignore_ctrl_c_and_die_with_their_parent(tmp_path: Path) -> None:
+    script = tmp_path / "sweep.py"
+    script.write_text(WORKER_SCRIPT)
+    parent = subprocess.Popen([sys.executable, str(script)], stderr=subprocess.DEVNULL,
+                              preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        deadline = time.monotonic() + 60
+        workers: set[int] = set()
+        while time.monotonic() < deadline:
+            workers = _children(parent.pid)  # the pool's worker processes
+            if len(workers) >= 2:
+                break
+            time.sleep(0.1)
+        assert len(workers) >= 2
+        time.sleep(1.0)  # the workers have run their initializer
+        for pid in workers:  # Ctrl-C reaches the whole group: the workers ignore it
+            os.kill(pid, signal.SIGINT)
+        time.sleep(0.5)
+        assert all(Path(f"/proc/{pid}").exists() for pid in workers)
+        parent.kill()  # SIGKILL: no clean-up code of the parent runs
+        parent.wait(10)
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and any(_alive(pid) for pid in workers):
+            time.sleep(0.1)
+        assert not any(_alive(pid) for pid in workers), "workers outlived their parent"
+    finally:
+        parent.kill()
+        parent.wait(10)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().split(")")[-1].split()[0]
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+    return state != "Z"
