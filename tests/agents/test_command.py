@@ -79,3 +79,69 @@ def test_the_committed_ppo_policy_drives_a_lap(capsys: pytest.CaptureFixture[str
                        "--no-recover", "--json")
     summary = json.loads(out)
     assert code == 0 and summary["laps_completed"] == 1 and summary["departures"] == 0
+
+
+def _forbid(monkeypatch: pytest.MonkeyPatch, target: str) -> None:
+    def refuse(*_: object, **__: object) -> None:
+        raise AssertionError(f"{target} ran although the command should have stopped first")
+    monkeypatch.setattr(target, refuse)
+
+
+def test_stress_keeps_an_earlier_report_without_force(tmp_path: Path,
+                                                      monkeypatch: pytest.MonkeyPatch,
+                                                      capsys: pytest.CaptureFixture[str]
+                                                      ) -> None:
+    """The issue's reproduction: stress overwrote stress.md/.json/.png in --out."""
+    (tmp_path / "stress.md").write_text("earlier")
+    _forbid(monkeypatch, "agents.stress.iter_battery")
+    code, _, err = run(capsys, "stress", "--seeds", "10003:10004", "--out", str(tmp_path))
+    assert code == 2 and "stress.md exists; add --force" in err
+    assert (tmp_path / "stress.md").read_text() == "earlier"
+    # --out naming a file is refused before the computation, not after it.
+    (tmp_path / "existing.json").write_text("{}")
+    code, _, err = run(capsys, "stress", "--out", str(tmp_path / "existing.json"))
+    assert code == 2 and "is a file; give a folder" in err
+
+
+def test_stress_force_replaces_the_report(tmp_path: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "stress.md").write_text("earlier")
+    code, out, _ = run(capsys, "stress", "--seeds", "10003:10004", "--faults", "lateral_kick",
+                       "--workers", "1", "--out", str(tmp_path), "--force", "--json")
+    assert code == 0 and json.loads(out)["runs"] == 2
+    assert "lateral_kick" in (tmp_path / "stress.md").read_text()
+    runs = (tmp_path / "stress.jsonl").read_text().splitlines()
+    assert [json.loads(r)["lis_reset_stage"] for r in runs] == [True, False]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["stress.json", "stress.jsonl",
+                                                          "stress.md", "stress.png"]
+
+
+def test_a_failed_training_leaves_no_out_folder(tmp_path: Path,
+                                                monkeypatch: pytest.MonkeyPatch,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """The issue's reproduction created --out's tb/PPO_1 before failing."""
+    pytest.importorskip("stable_baselines3")
+
+    def broken(*_: object, **__: object) -> None:
+        raise RuntimeError("the learner failed")
+
+    monkeypatch.setattr("stable_baselines3.PPO.learn", broken)
+    monkeypatch.setenv("TFALDA_SIM_DEBUG", "")
+    code, _, err = run(capsys, "train", "--timesteps", "100", "--n-envs", "1", "--out",
+                       str(tmp_path / "out" / "tr"), "--json")
+    assert code == 1 and "internal error: RuntimeError: the learner failed" in err
+    assert not (tmp_path / "out" / "tr").exists()
+    assert [p.name for p in (tmp_path / "out").iterdir()] == []
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["train", "--n-envs", "100000"], "expected an integer from 1 to 64"),
+    (["train", "--seed", "-3"], "seed must be an integer"),
+    (["evaluate-agent", "--speeds", "1.5,9"], "the car's top speed"),
+    (["evaluate-agent", "--laps", "0"], "expected an integer from 1"),
+    (["drive", "--laps", "1" + "0" * 400], "expected an integer"),
+])
+def test_agent_commands_refuse_bad_values_at_the_parser(capsys: pytest.CaptureFixture[str],
+                                                        argv: list[str], message: str) -> None:
+    code, _, err = run(capsys, *argv)
+    assert code == 2 and "usage:" in err and message in err

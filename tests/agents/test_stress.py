@@ -22,3 +22,34 @@ def test_summary_table_has_one_row_per_fault_and_stage() -> None:
     assert table.count("\n") == 3 and "lateral_kick | on" in table
     assert set(FAULTS) >= {"blackout", "overexposed", "glare", "marking_gap", "lateral_kick",
                            "camera_shake", "obstacle", "fast_curve"}
+
+
+def test_the_tally_gives_numpys_median_and_the_rates() -> None:
+    import numpy as np
+
+    from agents.stress import StressRun, StressTally
+
+    rng = np.random.default_rng(1)
+    for n in (1, 2, 5, 10, 37):
+        frames = [int(v) if v >= 0 else None for v in rng.integers(-5, 150, n)]
+        tally = StressTally()
+        for k, f in enumerate(frames):
+            tally.add(StressRun(seed=k, fault="glare", lis_reset_stage=True, reset=k % 2 == 0,
+                                frames_to_recover=f, false_resets=k % 3, on_road=k % 4 != 0,
+                                resets=1))
+        (row,) = tally.rows()
+        done = [f for f in frames if f is not None]
+        assert row["median_frames_to_recover"] == (float(np.median(done)) if done else None)
+        assert row["recovered_rate"] == len(done) / n and row["runs"] == n
+        assert row["false_resets_per_run"] == np.mean([k % 3 for k in range(n)])
+
+
+def test_battery_jobs_are_lazy_and_seed_by_seed() -> None:
+    from itertools import islice
+
+    from agents.stress import battery_jobs
+
+    jobs = battery_jobs(range(10**8), ["none", "blackout"])
+    assert list(islice(jobs, 5)) == [(0, "none", True), (0, "none", False),
+                                     (0, "blackout", True), (0, "blackout", False),
+                                     (1, "none", True)]

@@ -116,3 +116,11 @@ def test_compare_cli_refuses_an_empty_run(args: list[str], message: str, capsys)
 def test_compare_cli_refuses_an_unknown_scenario(capsys) -> None:
     assert main(["compare", "--thesis", "straight,bend"]) == 2
     assert "straight, curve and/or track" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("args", [["--thesis", "straight", "--no-thesis"],
+                                  ["--seeds", "1:3", "--no-generated"]])
+def test_compare_refuses_contradictory_flags(args: list[str], capsys) -> None:
+    """The issue's reproduction: --thesis straight --no-thesis ran the generated tracks."""
+    assert main(["compare", *args]) == 2
+    assert "not allowed with argument" in capsys.readouterr().err

@@ -77,3 +77,19 @@ def test_bad_input_exits_2_with_the_reason(argv: list[str], message: str, tmp_pa
 def test_argparse_rejects_unknown_values(argv: list[str],
                                          capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["evaluate", *argv]) == 2
+
+
+@pytest.mark.parametrize("argv, message", [
+    # The issue's reproductions: ValueError tracebacks before.
+    (["--scenario", "straight", "--speed", "1e9"], "the car's top speed"),
+    (["--scenario", "straight", "--stride", "1000000"], "expected an integer from 1 to 50"),
+    (["--scenario", "random", "--seeds", "0:2", "--stride", "1000000"], "from 1 to 50"),
+    (["--scenario", "straight", "--stride", "3"], "does not fit the thesis' straight drive"),
+    (["--scenario", "straight", "--epsilon-px", "1e9"], "--epsilon-px"),
+    (["--scenario", "straight", "--ablation", "--no-lis"], "not allowed with argument"),
+])
+def test_bad_values_exit_2_with_the_usage(argv: list[str], message: str,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    code, _, err = run(capsys, "evaluate", *argv)
+    assert code == 2 and "usage: tfalda-sim evaluate" in err and message in err
+    assert "Traceback" not in err
