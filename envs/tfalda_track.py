@@ -430,7 +430,11 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
 
     # ------------------------------------------------------------------ step
     def _check_action(self, action: object) -> np.ndarray:
-        a = np.asarray(action)
+        try:
+            a = np.asarray(action)
+        except (TypeError, ValueError) as exc:  # ragged lists, bytes mixed with str, …
+            raise ValueError(f"action must be an array of shape {self.action_space.shape} "
+                             f"of real numbers, got {show(action)} ({exc})") from None
         shape = self.action_space.shape
         if a.shape != shape:
             raise ValueError(f"action must have shape {shape} (steering"

@@ -247,3 +247,12 @@ def test_a_refused_reset_leaves_the_episode_as_it_was() -> None:
         obs_a, reward_a, *_ = a.step(np.array([0.1], np.float32))
         obs_b, reward_b, *_ = b.step(np.array([0.1], np.float32))
         assert np.array_equal(obs_a, obs_b) and reward_a == reward_b
+
+
+def test_unconvertible_actions_are_named() -> None:
+    """np.asarray raised its own UnicodeDecodeError/ValueError for these before."""
+    env = TfaldaTrackEnv(track="oval")
+    env.reset(seed=0)
+    for action in ([b"\xff", "y"], [[1.0, 2.0], [3.0]]):
+        with pytest.raises(ValueError, match="action must be an array of shape"):
+            env.step(action)
