@@ -120,7 +120,9 @@ def add_train_parser(sub: Any) -> None:
     tr.add_argument("--out", type=Path, default=Path("runs/ppo"),
                     help="folder for policy.zip, train.json, tb/ and checkpoints/")
     tr.add_argument("--force", action="store_true",
-                    help="replace an earlier run's policy.zip and train.json in --out")
+                    help="write into a folder that holds an earlier run: its policy.zip, "
+                         "train.json and same-named checkpoints are replaced, its TensorBoard "
+                         "runs kept beside the new one")
     tr.add_argument("--json", action="store_true", help="print one JSON object")
     tr.set_defaults(func=_cmd_train)
 
@@ -133,10 +135,10 @@ def _cmd_train(args: argparse.Namespace) -> int:
                        "pip install -e '.[rl]'") from None
     from tfalda_sim.parallel import WORKER_MEMORY_BYTES, available_memory_bytes
 
-    from .train import train
+    from .train import OUT_FILES, train
 
     check_outputs({"out": args.out}, {"out": DIRECTORY}, args.force,
-                  files_in={"out": ("policy.zip", "train.json")})
+                  files_in={"out": OUT_FILES})
     mem = available_memory_bytes()
     if args.n_envs > 1 and mem is not None and args.n_envs * WORKER_MEMORY_BYTES > mem:
         raise CliError(f"--n-envs {args.n_envs} needs about "

@@ -30,6 +30,8 @@ def _one(job: tuple[str, str | None, int, int, float]) -> dict[str, Any]:
     track = replace(generate(seed), obstacles=())  # lane keeping: no cartons to avoid
     result = drive(make_agent(kind, policy), track, laps=laps, speed_m_s=speed,
                    recover=False, label=f"seed {seed}")
+    if result.ended == "interrupted":  # drive() stops at Ctrl-C; the sweep must stop too
+        raise KeyboardInterrupt
     return {"seed": seed, "speed_m_s": speed, "success": result.laps_completed == laps,
             **{k: v for k, v in result.summary().items() if k != "track"}}
 

@@ -110,20 +110,33 @@ def _stop_workers(venv: Any) -> None:
 
 def _publish_run(staging: Path, out: Path) -> None:
     """Move a finished (or interrupted) run from its staging folder into ``out``: files
-    replace files of the same name, folders (tb, checkpoints) are merged."""
+    replace files of the same name (policy.zip, train.json, checkpoints), and the
+    TensorBoard run folder is added beside earlier ones under the next free name
+    (PPO_2, …) — an earlier run's logs are never deleted."""
     out.mkdir(parents=True, exist_ok=True)
     for entry in staging.iterdir():
         target = out / entry.name
-        if entry.is_dir():
-            target.mkdir(exist_ok=True)
-            for child in entry.iterdir():
-                dest = target / child.name
-                if dest.is_dir() and not dest.is_symlink():
-                    shutil.rmtree(dest)
-                os.replace(child, dest)
-        else:
+        if not entry.is_dir():
             os.replace(entry, target)
+            continue
+        target.mkdir(exist_ok=True)
+        for child in entry.iterdir():
+            dest = target / child.name
+            if child.is_dir():
+                stem, k = child.name.rsplit("_", 1) if "_" in child.name else (child.name, "1")
+                n = int(k) if k.isdigit() else 1
+                while dest.exists():
+                    n += 1
+                    dest = target / f"{stem}_{n}"
+            os.replace(child, dest)
     shutil.rmtree(staging, ignore_errors=True)
+
+
+def _existing_ancestor(path: Path) -> Path:
+    p = path.absolute().parent
+    while not p.exists():
+        p = p.parent
+    return p
 
 
 def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfig | None = None,
@@ -142,8 +155,10 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
 
     cfg = config or PpoConfig()
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent))
+    # Staged in the nearest existing folder (same file system, so the final moves are
+    # renames): a failed or early-interrupted run creates no folder at all.
+    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp",
+                                    dir=_existing_ancestor(out)))
     try:
         vec_cls = SubprocVecEnv if subprocess and n_envs > 1 else DummyVecEnv
         venv = make_vec_env(_make_env, n_envs=n_envs, seed=seed, vec_env_cls=vec_cls,

@@ -93,7 +93,7 @@ def assert_clean_interrupt(code: int, err: str, peak: int) -> None:
 
 def test_stress_over_a_huge_range_streams_and_keeps_its_runs(tmp_path: Path) -> None:
     out = tmp_path / "stress"
-    code, stdout, err, peak = run_until(
+    code, _, err, peak = run_until(
         ["stress", "--seeds", "0:100000000", "--workers", "2", "--out", str(out)],
         lambda: _lines(".stress.*.tmp.jsonl", out) >= 2, tmp_path)
     assert_clean_interrupt(code, err, peak)
@@ -108,7 +108,7 @@ def test_stress_over_a_huge_range_streams_and_keeps_its_runs(tmp_path: Path) -> 
 
 def test_evaluate_over_a_huge_range_streams_and_keeps_its_tracks(tmp_path: Path) -> None:
     jsonl = tmp_path / "frames.jsonl"
-    code, stdout, err, peak = run_until(
+    code, _, err, peak = run_until(
         ["evaluate", "--scenario", "random", "--seeds", "0:100000000", "--max-frames", "20",
          "--jsonl", str(jsonl), "--plot", str(tmp_path / "seeds.png")],
         lambda: _lines(".frames.*.tmp.jsonl", tmp_path) >= 40, tmp_path)
@@ -136,7 +136,7 @@ def test_drive_keeps_its_video_on_ctrl_c(tmp_path: Path) -> None:
     """The issue's reproduction: a billion laps with a video, SIGINT → no video."""
     video = tmp_path / "long.mp4"
     started = time.monotonic()
-    code, stdout, err, peak = run_until(
+    code, _, err, peak = run_until(
         ["drive", "--track", "oval", "--laps", "1000000000", "--video", str(video)],
         lambda: time.monotonic() - started > 12, tmp_path)
     assert_clean_interrupt(code, err, peak)
@@ -152,7 +152,7 @@ def test_train_keeps_the_policy_so_far_on_ctrl_c(tmp_path: Path) -> None:
     pytest.importorskip("stable_baselines3")
     out = tmp_path / "run"
     started = time.monotonic()
-    code, stdout, err, peak = run_until(
+    code, _, err, _ = run_until(
         ["train", "--timesteps", "1000000000", "--n-envs", "2", "--out", str(out)],
         lambda: time.monotonic() - started > 25, tmp_path, budget_s=60)
     assert code == 130 and "Traceback" not in err, err

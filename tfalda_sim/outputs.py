@@ -119,7 +119,8 @@ def check_outputs(outputs: Iterable[Output], *, force: bool,
         for opt_in, src in (inputs or {}).items():
             if _same(a, src):
                 raise OutputError(f"{opt_a} {a} is the {opt_in} input; write elsewhere")
-    existing = [str(p) for _, p in targets if p.exists()]
+    # A dangling symlink counts as existing: writing would replace the link.
+    existing = [str(p) for _, p in targets if p.exists() or p.is_symlink()]
     if existing and not force:
         raise OutputError(f"{', '.join(existing)} exists; add --force to overwrite")
 

@@ -37,7 +37,7 @@ def test_unwritable_outputs_are_refused_naming_the_option(tmp_path: Path, case: 
 
 def test_suffix_existing_inputs_and_duplicates(tmp_path: Path) -> None:
     target = tmp_path / "a.png"
-    with pytest.raises(OutputError, match="must end in .png"):
+    with pytest.raises(OutputError, match=r"must end in \.png"):
         check_outputs([Output("--png", tmp_path / "a.jpg", ".png")], force=False)
     target.write_bytes(b"old")
     with pytest.raises(OutputError, match="add --force"):
@@ -163,3 +163,10 @@ def test_an_output_may_not_replace_an_input(tmp_path: Path,
                  str(tmp_path / "p.zip"), "--force"]) == 2
     assert "must end in .json" in capsys.readouterr().err
     assert track.read_bytes() == before and policy.read_bytes() == b"zip"
+
+
+def test_a_dangling_symlink_counts_as_an_existing_output(tmp_path: Path) -> None:
+    link = tmp_path / "frame.png"
+    link.symlink_to(tmp_path / "gone.png")
+    with pytest.raises(OutputError, match="add --force"):
+        check_outputs([Output("--out", link, ".png")], force=False)

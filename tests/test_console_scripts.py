@@ -1,0 +1,311 @@
+"""Every subcommand through the installed ``tfalda-sim`` console script, as a user runs it.
+
+The in-process tests call ``tfalda_sim.cli.main``; these run the script installed next to
+the interpreter running the tests, in a subprocess, with tiny budgets. They catch what
+only an installation shows: an entry point that does not resolve, a dependency one
+command imports that the package does not declare (``train`` once crashed with
+"ImportError: You must install tqdm and rich" from SB3's progress bar). Each command
+must exit 0, print no traceback and no "internal error", print JSON with its key figures
+and write the files it says it wrote. ``test_every_subcommand_is_covered`` fails when a
+subcommand is added without a test here.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import zipfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TypeVar
+
+import cv2
+import pytest
+
+from tests.cli_helpers import command_tree, leaf_commands
+from tracks import NAMED_TRACKS, load_track
+
+SCRIPT: str | None = shutil.which("tfalda-sim", path=str(Path(sys.executable).parent))
+"""The console script of the interpreter running the tests (None: not installed)."""
+
+TIMEOUT_S = 300.0
+"""Hard limit per command (each takes seconds; a hang must not stall CI)."""
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+COVERED: dict[tuple[str, ...], str] = {}
+"""The subcommands with a console test here, by path → the test's name."""
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def covers(*command: str) -> Callable[[F], F]:
+    """Register a test as the console test of ``command`` (``"track", "list"``)."""
+    def register(fn: F) -> F:
+        COVERED[command] = fn.__name__
+        return fn
+    return register
+
+
+@dataclass(frozen=True)
+class Run:
+    argv: tuple[str, ...]
+    code: int
+    out: str
+    err: str
+
+    def __str__(self) -> str:
+        return (f"tfalda-sim {' '.join(self.argv)} → exit {self.code}\n"
+                f"--- stdout\n{self.out[-3000:]}\n--- stderr\n{self.err[-3000:]}")
+
+    def json(self) -> dict[str, Any]:
+        try:
+            doc = json.loads(self.out)
+        except json.JSONDecodeError as exc:
+            pytest.fail(f"stdout is not one JSON object ({exc})\n{self}")
+        assert isinstance(doc, dict), str(self)
+        return doc
+
+
+def _child_env() -> dict[str, str]:
+    env = dict(os.environ)
+    env.pop("TFALDA_SIM_DEBUG", None)  # the one-line "internal error" users see
+    return env
+
+
+def _default_sigint() -> None:
+    # CI may start the tests with SIGINT ignored, which a child inherits.
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def tfalda(*argv: str | Path, cwd: Path, code: int = 0) -> Run:
+    """Run the console script with ``argv`` in ``cwd``; assert it exits with ``code``
+    and prints neither a traceback nor an internal error."""
+    if SCRIPT is None:
+        pytest.fail(f"no tfalda-sim console script next to {sys.executable}: the package's "
+                    "[project.scripts] entry point is not installed")
+    args = tuple(str(a) for a in argv)
+    proc = subprocess.run([SCRIPT, *args], cwd=cwd, env=_child_env(), capture_output=True,
+                          text=True, timeout=TIMEOUT_S, check=False,
+                          preexec_fn=_default_sigint)
+    run = Run(args, proc.returncode, proc.stdout, proc.stderr)
+    assert "Traceback" not in run.err, str(run)
+    assert "internal error" not in run.err, str(run)
+    assert run.code == code, str(run)
+    return run
+
+
+def assert_png(path: Path, shape: tuple[int, ...] | None = None) -> None:
+    assert path.is_file(), f"{path} was not written"
+    assert path.read_bytes()[:8] == PNG_MAGIC, f"{path} is not a PNG"
+    if shape is not None:
+        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        assert image is not None and image.shape == shape, (path, getattr(image, "shape", None))
+
+
+def video_frames(path: Path) -> int:
+    """Frames an MP4 holds, counted by decoding it."""
+    cap = cv2.VideoCapture(str(path))
+    try:
+        assert cap.isOpened(), f"{path} does not open as a video"
+        n = 0
+        while cap.grab():
+            n += 1
+        return n
+    finally:
+        cap.release()
+
+
+# --------------------------------------------------------------------------- coverage
+def test_every_subcommand_is_covered() -> None:
+    """A subcommand added to the parser needs a console test here (``@covers``)."""
+    assert set(COVERED) == set(leaf_commands()), (
+        f"without a console test: {sorted(set(leaf_commands()) - set(COVERED))}; "
+        f"tests of commands the parser lacks: {sorted(set(COVERED) - set(leaf_commands()))}")
+
+
+def test_console_script_is_the_packages_entry_point() -> None:
+    assert SCRIPT is not None, f"no tfalda-sim next to {sys.executable}"
+    assert os.access(SCRIPT, os.X_OK)
+    assert Path(SCRIPT).parent == Path(sys.executable).parent
+
+
+@pytest.mark.parametrize("command", list(command_tree()),
+                         ids=lambda c: " ".join(c) or "tfalda-sim")
+def test_help(command: tuple[str, ...], tmp_path: Path) -> None:
+    run = tfalda(*command, "--help", cwd=tmp_path)
+    usage = " ".join(("usage: tfalda-sim", *command))
+    assert run.out.startswith(usage), str(run)
+    assert run.err == "", str(run)
+
+
+# --------------------------------------------------------------------------- track
+@covers("track", "list")
+def test_track_list(tmp_path: Path) -> None:
+    doc = tfalda("track", "list", "--json", cwd=tmp_path).json()
+    assert [row["name"] for row in doc["tracks"]] == list(NAMED_TRACKS)
+    for row in doc["tracks"]:
+        assert row["length_m"] > 0 and isinstance(row["closed"], bool), row
+
+
+@pytest.fixture(scope="module")
+def generated_track(tmp_path_factory: pytest.TempPathFactory) -> tuple[Run, Path]:
+    """``track generate --seed 1`` with both files, run once for the track tests."""
+    cwd = tmp_path_factory.mktemp("track")
+    return tfalda("track", "generate", "--seed", "1", "--json", "--out", "T.json",
+                  "--png", "T.png", cwd=cwd), cwd
+
+
+@covers("track", "generate")
+def test_track_generate(generated_track: tuple[Run, Path]) -> None:
+    run, cwd = generated_track
+    doc = run.json()
+    assert doc["seed"] == 1 and doc["valid"] is True and doc["violations"] == []
+    assert doc["closed"] is True and doc["length_m"] > 5 and doc["segments"] > 0
+    assert (doc["out"], doc["png"]) == ("T.json", "T.png")
+    track = load_track(cwd / doc["out"])
+    assert track.seed == 1 and track.length_m == pytest.approx(doc["length_m"])
+    assert_png(cwd / doc["png"])
+
+
+@covers("track", "validate")
+def test_track_validate(generated_track: tuple[Run, Path]) -> None:
+    _, cwd = generated_track
+    run = tfalda("track", "validate", "T.json", cwd=cwd)
+    assert "seed-1 (seed 1)" in run.out and "valid        yes" in run.out, str(run)
+
+
+# --------------------------------------------------------------------------- render
+@covers("render")
+def test_render(tmp_path: Path) -> None:
+    doc = tfalda("render", "--track", "oval", "--s", "1", "--out", "F.png", "--truth", "G.png",
+                 "--json", cwd=tmp_path).json()
+    assert doc["track"] == "oval" and doc["s_m"] == 1.0 and doc["render_ms"] > 0
+    assert len(doc["pose"]) == 3
+    assert (doc["out"], doc["truth"]) == ("F.png", "G.png")
+    assert_png(tmp_path / doc["out"], (480, 752))
+    assert_png(tmp_path / doc["truth"], (480, 752, 3))
+
+
+# --------------------------------------------------------------------------- evaluation
+@covers("evaluate")
+def test_evaluate(tmp_path: Path) -> None:
+    doc = tfalda("evaluate", "--scenario", "random", "--seeds", "3:4", "--max-frames", "5",
+                 "--json", "--jsonl", "X.jsonl", cwd=tmp_path).json()
+    assert doc["scenario"] == "random" and doc["seeds"] == [3, 4]
+    assert doc["interrupted"] is False and doc["frames_done"] == 5
+    assert set(doc["pooled"]) == set(doc["runs"]) == {"with LIS", "without LIS"}
+    for run in doc["per_seed"]:
+        assert run["frames"] == 5 and 0.0 <= run["mean_confidence"] <= 1.0, run
+    lines = (tmp_path / doc["jsonl"]).read_text().splitlines()
+    assert len(lines) == doc["jsonl_lines"] == 2 * 5
+    assert all(isinstance(json.loads(line), dict) for line in lines)
+
+
+@covers("compare")
+def test_compare(tmp_path: Path) -> None:
+    doc = tfalda("compare", "--no-thesis", "--seeds", "3:4", "--max-frames", "5",
+                 "--workers", "1", "--out", "DIR", "--json", cwd=tmp_path).json()
+    assert doc["thesis_scenarios"] == [] and doc["seeds"] == [3, 4]
+    assert doc["scenarios_done"] == doc["scenarios"] == 1 and doc["interrupted"] is False
+    assert "generated" in doc["groups"] and doc["groups"]["generated"], doc["groups"]
+    assert sorted(Path(p).name for p in doc["out"].values()) == sorted(
+        ["compare.jsonl", "compare.json", "compare.md", "compare.png"])
+    for path in doc["out"].values():
+        assert (tmp_path / path).is_file() and (tmp_path / path).stat().st_size > 0, path
+    assert json.loads((tmp_path / "DIR" / "compare.json").read_text())["scenarios_done"] == 1
+    assert len((tmp_path / "DIR" / "compare.jsonl").read_text().splitlines()) == 1
+    assert_png(tmp_path / "DIR" / "compare.png")
+
+
+# --------------------------------------------------------------------------- agents
+@pytest.fixture(scope="module")
+def drive_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Run, Path]:
+    """One PID lap of the oval with its video, run once (``replay`` reads the video)."""
+    cwd = tmp_path_factory.mktemp("drive")
+    return tfalda("drive", "--track", "oval", "--laps", "1", "--json", "--video", "V.mp4",
+                  cwd=cwd), cwd
+
+
+@covers("drive")
+def test_drive(drive_run: tuple[Run, Path]) -> None:
+    run, cwd = drive_run
+    doc = run.json()
+    assert doc["track"] == "oval" and doc["agent"] == "pid"
+    assert doc["laps_completed"] == 1 and len(doc["lap_times_s"]) == 1
+    assert 5.0 < doc["lap_times_s"][0] < 60.0 and doc["steps"] > 0
+    assert doc["mean_abs_cross_track_m"] < 0.2
+    assert doc["video"] == "V.mp4"
+    assert video_frames(cwd / doc["video"]) == doc["steps"]
+
+
+@covers("replay")
+def test_replay(drive_run: tuple[Run, Path]) -> None:
+    drive, cwd = drive_run
+    assert (cwd / "V.mp4").is_file(), f"the drive wrote no video\n{drive}"
+    doc = tfalda("replay", "V.mp4", "--detector", "hough", "--json", cwd=cwd).json()
+    assert doc["detector"] == "hough" and doc["stopped"] == "loops"
+    assert doc["loops_completed"] == 1 and doc["frames"] == drive.json()["steps"]
+    assert doc["frames_per_s"] > 0 and doc["detections_per_frame"] > 0
+    assert doc["out"] is None
+
+
+@covers("stress")
+def test_stress(tmp_path: Path) -> None:
+    from agents.stress import REPORT_FILES
+
+    doc = tfalda("stress", "--seeds", "10003:10004", "--faults", "none", "--workers", "1",
+                 "--out", "DIR", "--json", cwd=tmp_path).json()
+    assert doc["jobs"] == doc["runs"] == 2 and doc["interrupted"] is False
+    assert {(row["fault"], row["lis_reset_stage"]) for row in doc["summary"]} == {
+        ("none", True), ("none", False)}
+    assert doc["out"] == "DIR"
+    for name in REPORT_FILES.values():
+        assert (tmp_path / "DIR" / name).is_file(), name
+    assert len((tmp_path / "DIR" / REPORT_FILES["jsonl"]).read_text().splitlines()) == 2
+    assert_png(tmp_path / "DIR" / REPORT_FILES["png"])
+
+
+@covers("evaluate-agent")
+def test_evaluate_agent(tmp_path: Path) -> None:
+    doc = tfalda("evaluate-agent", "--seeds", "10003:10004", "--laps", "1", "--workers", "1",
+                 "--json", cwd=tmp_path).json()
+    assert doc["agent"] == "pid" and doc["seeds"] == [10003, 10004] and doc["laps"] == 1
+    assert doc["interrupted"] is False and len(doc["runs"]) == 1
+    (speed,) = doc["speeds"]
+    assert speed["speed_m_s"] == 1.5 and speed["tracks"] == 1
+    assert 0.0 <= speed["success_rate"] <= 1.0
+
+
+def _train(tmp_path: Path, *extra: str) -> Run:
+    pytest.importorskip("stable_baselines3", reason="train needs the rl extra")
+    return tfalda("train", "--timesteps", "64", "--n-envs", "1", "--out", "out/tr", *extra,
+                  cwd=tmp_path)
+
+
+def _assert_trained(folder: Path) -> dict[str, Any]:
+    assert zipfile.is_zipfile(folder / "policy.zip"), f"no policy in {folder}"
+    summary = json.loads((folder / "train.json").read_text())
+    assert summary["interrupted"] is False and summary["timesteps_done"] >= 64, summary
+    return summary
+
+
+@covers("train")
+def test_train_json(tmp_path: Path) -> None:
+    doc = _train(tmp_path, "--json").json()
+    assert doc["timesteps"] == 64 and doc["n_envs"] == 1
+    assert doc["interrupted"] is False and doc["timesteps_done"] >= 64
+    assert _assert_trained(tmp_path / "out" / "tr")["timesteps_done"] == doc["timesteps_done"]
+
+
+def test_train_with_progress_bar(tmp_path: Path) -> None:
+    """Without --json the progress bar runs: the path that needed SB3's tqdm+rich extra."""
+    run = _train(tmp_path)
+    assert "trained" in run.out and "policy.zip" in run.out, str(run)
+    assert "100%" in run.err, str(run)  # the bar reached its end
+    _assert_trained(tmp_path / "out" / "tr")
