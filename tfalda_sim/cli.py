@@ -181,7 +181,10 @@ def _cmd_render(args: argparse.Namespace) -> int:
     x, y, h = (float(v) for v in track.pose(args.s, args.lateral))
     pose = (x, y, h + args.heading)
     renderer = Renderer()
-    scene = build_scene(track, effects, rng)
+    try:
+        scene = build_scene(track, effects, rng)
+    except ValueError as exc:  # a legal but huge track: the marking map's pixel cap
+        raise CliError(f"--track {args.track}: cannot render this track: {exc}") from None
     renderer.render(scene, pose, frame_seed=args.seed)  # warm-up (JIT, caches) for the timing
     t0 = time.perf_counter()
     frame = renderer.render(scene, pose, frame_seed=args.seed)

@@ -67,22 +67,25 @@ __all__ = [
     "load_track", "publish", "save_track", "track_from_dict", "track_to_dict",
 ]
 
-MAX_SEGMENTS: int = 2000
+MAX_SEGMENTS: int = 100
 """Most segments in a file [count]. Generated tracks have ≤ 25, the named ones ≤ 9. The
-rule check compares every 5 cm sample with every segment: at this count and the longest
-track (``MAX_TRACK_LENGTH_M``) a file still validates within a few seconds."""
+rule check compares every 5 cm sample with every segment and keeps every close pair, so
+its cost is (track length / 5 cm) × segments: at this count and the longest track
+(``MAX_TRACK_LENGTH_M``) the most hostile file (every segment close to every sample, each
+close pair its own overlap) takes ≈ 3.5 s to validate on a 2-core VM."""
 
-MAX_GAPS: int = 1000
-"""Most marking gaps in a file [count]. Generated tracks have ≤ 8. Each rasterised line
-pixel looks at every gap, so the count multiplies the time to paint the map."""
+MAX_GAPS: int = 200
+"""Most marking gaps in a file [count]. Generated tracks have ≤ 8. Every line pixel the
+rasteriser paints looks at every gap, so the count multiplies the time to draw the map."""
 
-MAX_OBSTACLES: int = 500
+MAX_OBSTACLES: int = 250
 """Most obstacles in a file [count]. Generated tracks have ≤ 7; with the rules' ≥ 1 m
-of free road between cartons a 500 m track holds fewer than 460."""
+of free road between cartons the longest track holds fewer than 230."""
 
-MAX_INTERSECTIONS: int = 100
-"""Most intersections in a file [count]. Generated tracks have ≤ 1. Every close approach
-found by the overlap check is compared with every intersection."""
+MAX_INTERSECTIONS: int = 4
+"""Most intersections in a file [count]. Generated tracks have ≤ 1, Carolo-Cup tracks one
+or two. Every close approach the overlap check finds is compared with every one (in
+Python): each intersection adds ≈ 0.5 s to the most hostile file's rule check."""
 
 MAX_MAT_EXTENT_M: float = 1000.0
 """Largest magnitude [m] of any coordinate, radius, position along the road, offset or
@@ -101,7 +104,7 @@ MIN_RADIUS_M: float = 0.001
 
 MAX_FILE_BYTES: int = 1024 * 1024
 """Largest track file [bytes] (1 MiB). A generated track's file is ≈ 5 kB; one at every
-count limit above, indented as ``save_track`` writes it, is ≈ 0.5 MB. At most this + 1
+count limit above, indented as ``save_track`` writes it, ≈ 80 kB. At most this + 1
 bytes are read, so a huge file (or a device) is refused without reading it."""
 
 MAX_JSON_DEPTH: int = 16
@@ -175,8 +178,17 @@ def _show(v: Any) -> str:
         return "an object"
     if isinstance(v, list):
         return f"a list of {len(v)}"
-    text = json.dumps(v)
-    return text if len(text) <= 60 else text[:57] + "..."
+    return _clip(json.dumps(v))
+
+
+def _clip(text: str, most: int = 60) -> str:
+    return text if len(text) <= most else text[:most - 3] + "..."
+
+
+def _some(keys: list[str] | tuple[str, ...], most: int = 5) -> str:
+    """The first ``most`` keys for an error message (a hostile object may have 100,000)."""
+    shown = ", ".join(_clip(repr(k)) for k in keys[:most])
+    return shown if len(keys) <= most else f"{shown}, … ({len(keys)} in all)"
 
 
 def _kind(v: Any) -> str:
@@ -212,11 +224,10 @@ class _Reader:
             self.fail(f"must be an object, got {_kind(obj)}")
         duplicates = getattr(obj, "duplicates", ())
         if duplicates:
-            self.fail(f"duplicate key(s) {', '.join(map(repr, duplicates))}")
+            self.fail(f"duplicate key(s) {_some(duplicates)}")
         unknown = sorted(set(obj) - allowed)
         if unknown:
-            self.fail(f"unknown key(s) {', '.join(map(repr, unknown))}; allowed: "
-                      f"{', '.join(sorted(allowed))}")
+            self.fail(f"unknown key(s) {_some(unknown)}; allowed: {', '.join(sorted(allowed))}")
         self.obj = obj
 
     def fail(self, message: str, key: str | None = None) -> NoReturn:
@@ -277,7 +288,7 @@ class _Reader:
     def choice(self, key: str, options: tuple[str, ...]) -> str:
         v = self.text(key, required=True)
         if v not in options:
-            self.fail(f"must be one of {', '.join(options)}, got {_show(v)}", key)
+            self.fail(f"must be one of {', '.join(options)}, got {_clip(repr(v))}", key)
         return v
 
     def items(self, key: str, required: bool = False, limit: int | None = None,
@@ -353,8 +364,11 @@ def track_from_dict(data: Any, source: str = "<dict>") -> Track:
     gaps = []
     for i, raw in enumerate(top.items("gaps", limit=MAX_GAPS, limit_name="MAX_GAPS")):
         g = top.child(raw, f"gaps[{i}]", {"line", "s_m", "length_m"})
-        gaps.append(Gap(Line(g.choice("line", tuple(m.value for m in Line))), g.number("s_m"),
-                        g.number("length_m")))
+        line = g.choice("line", tuple(m.value for m in Line))
+        s_m, length = g.number("s_m"), g.number("length_m")
+        if length < 0:  # no meaning, and the rule check's sweep needs starts before ends
+            g.fail(f"must be ≥ 0, got {length:g}", "length_m")
+        gaps.append(Gap(Line(line), s_m, length))
     obstacles = []
     for i, raw in enumerate(top.items("obstacles", limit=MAX_OBSTACLES,
                                       limit_name="MAX_OBSTACLES")):

@@ -21,12 +21,12 @@ from .geometry import pose_at
 from .index import GridIndex, build_index, locate_point, locate_points
 from .rules import LANE_WIDTH_M, LINE_WIDTH_M
 
-MAX_TRACK_LENGTH_M: float = 500.0
+MAX_TRACK_LENGTH_M: float = 250.0
 """Longest centre line a track may have [m]. A Carolo-Cup mat is at most tens of metres
-across (generated tracks, seeds 0–999: ≤ 53 m; the named ones: ≤ 42 m), so 500 m is a
-tenfold margin. Everything laid out per metre of road (rule-check samples every 5 cm,
-the spatial index, map pixels) is proportional to it: the limit keeps a hostile track
-from allocating gigabytes."""
+across (generated tracks, seeds 0–999: ≤ 53 m; the named ones: ≤ 42 m), so 250 m is a
+margin of almost five. Everything laid out per metre of road (rule-check samples every
+5 cm, the spatial index, map pixels) is proportional to it; with
+``tracks.fileformat.MAX_SEGMENTS`` it bounds the rule check's time to a few seconds."""
 
 MAX_LANE_WIDTH_M: float = 1.0
 """Widest lane [m]: 2.5 × the rules' ≈ 0.40 m (``validate`` accepts 0.35–0.45 m). The
@@ -102,6 +102,12 @@ class Gap:
     line: Line
     s_m: float
     length_m: float
+
+    def __post_init__(self) -> None:
+        # A negative stretch has no meaning (and broke the rules' event sweep); zero is
+        # left to the rules, which report it.
+        if not self.length_m >= 0:
+            raise ValueError(f"a gap's length_m must be ≥ 0, got {self.length_m}")
 
 
 @dataclass(frozen=True)

@@ -111,3 +111,19 @@ def test_render_refuses_non_finite_numbers(option: str, tmp_path: Path,
     assert main(["render", "--track", "straight", "--out", str(tmp_path / "f.png"),
                  *[a for kv in argv.items() for a in kv]]) == 2
     assert "finite" in capsys.readouterr().err
+
+
+def test_render_refuses_a_legal_but_unrenderable_track(tmp_path: Path,
+                                                       capsys: pytest.CaptureFixture[str]
+                                                       ) -> None:
+    """A 249 m diagonal is within the track-file limits but over the raster's pixel cap:
+    one error line, exit 2 (was an internal error)."""
+    doc = {"format": "tfalda-sim/track", "version": 1, "name": "diag", "closed": False,
+           "lane_width_m": 0.4, "start": {"x_m": 0, "y_m": 0, "heading_rad": 0.785},
+           "start_line_s_m": None, "segments": [{"type": "straight", "length_m": 249}]}
+    path = tmp_path / "diag.json"
+    path.write_text(json.dumps(doc))
+    code, _, err = run(capsys, "render", "--track", str(path), "--s", "1", "--out",
+                       str(tmp_path / "f.png"))
+    assert code == 2 and "cannot render this track" in err and "too large" in err
+    assert not (tmp_path / "f.png").exists()

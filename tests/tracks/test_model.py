@@ -151,3 +151,12 @@ def test_heading_at_equals_the_vectorised_heading(eight) -> None:
         assert np.array_equal([track.heading_at(float(v)) for v in s], track.heading(s))
     with pytest.raises(ValueError, match="outside"):
         load_named("straight").heading_at(-1.0)
+
+
+def test_a_gap_of_negative_length_is_refused() -> None:
+    """Found by the track-file fuzz: validate() crashed with a KeyError on one."""
+    from tracks.model import Gap, Line
+
+    with pytest.raises(ValueError, match="gap's length_m must be ≥ 0"):
+        Gap(Line.RIGHT, 1.0, -0.1)
+    assert Gap(Line.RIGHT, 1.0, 0.0).length_m == 0.0
