@@ -37,7 +37,10 @@ def fail_on_three(x: int) -> int:
 def _children(pid: int) -> set[int]:
     kids: set[int] = set()
     for task in Path(f"/proc/{pid}/task").iterdir():
-        text = (task / "children").read_text().split()
+        try:  # a thread may end between the listing and the read
+            text = (task / "children").read_text().split()
+        except FileNotFoundError:
+            continue
         kids.update(int(t) for t in text)
     return kids
 
