@@ -39,7 +39,13 @@ def _h(*arrays: Any) -> str:
 
 def renders() -> dict[str, str]:
     from tfalda_sim.perception import DetectorConfig, HoughConfig, HoughDetector, TfaldaDetector
-    from tfalda_sim.rendering import DomainRandomization, Effects, Renderer, build_scene, frame_truth
+    from tfalda_sim.rendering import (
+        DomainRandomization,
+        Effects,
+        Renderer,
+        build_scene,
+        frame_truth,
+    )
 
     out: dict[str, str] = {}
     renderer = Renderer()
