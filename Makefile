@@ -13,6 +13,9 @@ $(BIN)/.installed: pyproject.toml
 	# never makes pip fetch another torch with gigabytes of CUDA.
 	$(BIN)/python -m pip install --quiet torch==2.13.0
 	$(BIN)/python -m pip install --quiet -e '.[dev,rl]'
+	# numba's on-disk cache pickles the module name of each kernel: entries compiled before
+	# a package moved (tracks -> tfalda_sim.tracks) would name a module that is gone.
+	find tfalda_sim tracks envs agents -name '*.nb[ic]' -delete
 	touch $@
 
 install: $(BIN)/.installed
@@ -46,3 +49,4 @@ evaluation-docs: install
 
 clean:
 	rm -rf $(VENV) $(OUT) .pytest_cache .ruff_cache
+	find tfalda_sim tracks envs agents -name '*.nb[ic]' -delete

@@ -8,6 +8,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
+from tfalda_sim.tracks import NAMED_TRACKS, generate, load_named
 from tqdm import tqdm
 
 from tfalda_sim.cli_common import (
@@ -23,7 +24,6 @@ from tfalda_sim.cli_common import (
     speed_arg,
     workers_arg_value,
 )
-from tracks import NAMED_TRACKS, generate, load_named
 
 
 def add_drive_parser(sub: Any) -> None:

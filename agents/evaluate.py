@@ -17,10 +17,10 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
+from tfalda_sim.tracks import generate
 from tqdm import tqdm
 
 from tfalda_sim.parallel import resolve_workers, stream
-from tracks import generate
 
 from .drive import drive, make_agent
 
@@ -92,7 +92,7 @@ def evaluate(kind: str, seeds: range, *, laps: int = 3, speeds: tuple[float, ...
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m agents.evaluate …`` is ``tfalda-sim evaluate-agent …``."""
+    """``python -m tfalda_sim.agents.evaluate …`` is ``tfalda-sim evaluate-agent …``."""
     from tfalda_sim.cli import main as cli_main
 
     return cli_main(["evaluate-agent", *(sys.argv[1:] if argv is None else argv)])

@@ -10,8 +10,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-from envs import TfaldaTrackEnv
+from tfalda_sim.envs import TfaldaTrackEnv
 
 K_LATERAL: float = 3.0
 """Steering command per metre of offset from the right lane's centre [1/m]."""

@@ -1,6 +1,7 @@
 """A PID lane keeper that steers from the TFALDA + LIS lanes alone (no ground truth).
 
-Each step it decodes the four lanes of the ``"lanes"`` observation (``envs.observation``),
+Each step it decodes the four lanes of the ``"lanes"`` observation
+(``tfalda_sim.envs.observation``),
 takes their ends back to the ground through the car's own camera model (a calibration,
 not track knowledge) and, per ROI row, forms the lane centre between the left and right
 line and the lane direction. A lane model — the lane centre ``y(x) = y0 + ψ0·x + κ·x²/2``
@@ -33,11 +34,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from tfalda_sim.tracks.rules import LANE_WIDTH_M, min_centre_radius_m
 
 from tfalda_sim.camera import FRAME_RATE_HZ, FisheyeCamera
 from tfalda_sim.perception.params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX
 from tfalda_sim.vehicle import CarParams
-from tracks.rules import LANE_WIDTH_M, min_centre_radius_m
 
 LANE_WIDTH_TOLERANCE_M: float = 0.12
 """A row's two lines count as one lane when their distance is within this of the lane

@@ -1,8 +1,8 @@
 """PPO (stable-baselines3) on TfaldaTrack-v0's lane observations, on vectorised envs.
 
-    python -m agents.train --timesteps 1000000 --n-envs 2 --seed 0 --out runs/ppo
+    python -m tfalda_sim.agents.train --timesteps 1000000 --n-envs 2 --seed 0 --out runs/ppo
 
-Training tracks are the generated seeds of ``TRAIN_SEEDS``; ``agents.evaluate`` tests on
+Training tracks are the generated seeds of ``TRAIN_SEEDS``; ``tfalda_sim.agents.evaluate`` tests on
 the held-out ``TEST_SEEDS``. Writes TensorBoard logs (``OUT/tb``), checkpoints
 (``OUT/checkpoints``), the final policy (``OUT/policy.zip``) and ``OUT/train.json`` (the
 command's arguments, the training time, the machine). Needs the ``rl`` extra.
@@ -217,7 +217,7 @@ def _summary(timesteps: int, n_envs: int, seed: int, speed_m_s: float,
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m agents.train …`` is ``tfalda-sim train …``."""
+    """``python -m tfalda_sim.agents.train …`` is ``tfalda-sim train …``."""
     from tfalda_sim.cli import main as cli_main
 
     return cli_main(["train", *(sys.argv[1:] if argv is None else argv)])

@@ -18,6 +18,7 @@ import cv2
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from tfalda_sim.tracks import NAMED_TRACKS, GeneratorParams, Track, generate, load_named
 
 from tfalda_sim.camera import FRAME_RATE_HZ, FisheyeCamera
 from tfalda_sim.evaluation.geometric import geometric_hit_rates
@@ -38,7 +39,6 @@ from tfalda_sim.rendering.overlay import draw_observation
 from tfalda_sim.rendering.topdown import TopDownMap
 from tfalda_sim.vehicle import CarParams
 from tfalda_sim.world import TrackPosition, World
-from tracks import NAMED_TRACKS, GeneratorParams, Track, generate, load_named
 
 from ._checks import (
     check_bool,
@@ -112,12 +112,12 @@ TrackSpec = str | int | Track | None
 
 
 def resolve_track(spec: TrackSpec, obstacles: bool) -> Track:
-    """A track from a name (``tracks.NAMED_TRACKS``), a generator seed or a ``Track``;
+    """A track from a name (``tfalda_sim.tracks.NAMED_TRACKS``), a generator seed or a ``Track``;
     generated tracks lose their cartons unless ``obstacles``."""
     if isinstance(spec, Track):
         return spec
     accepted = (f"a name ({', '.join(NAMED_TRACKS)}), a generator seed (int ≥ 0) or a "
-                "tracks.Track")
+                "tfalda_sim.tracks.Track")
     if isinstance(spec, str):
         if spec not in NAMED_TRACKS:
             raise ValueError(f"unknown track {show(spec)}; use {accepted}")
@@ -178,7 +178,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
 
     ## Observation Space
     - ``"lanes"`` (default): ``Box((42,), float32)``, the frame's ``LaneObservation``
-      normalised; every index is documented in ``envs.observation`` (lane ends of the
+      normalised; every index is documented in ``tfalda_sim.envs.observation`` (lane ends of the
       four ROIs, ROI positions, LIS flags, lane widths, fault counter, reset, driving
       state, speed and steering feedback).
     - ``"image"``: ``Box(0, 255, (480, 752, 1), uint8)``, the grayscale camera frame.
@@ -221,7 +221,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
     ``render_mode``: ``None`` or ``"rgb_array"`` (the camera frame in colour with ROIs and
     lanes drawn, and a top-down inset). ``observation``: ``"lanes"``, ``"image"`` or
     ``"dict"`` (or an ``ObservationMode``). ``throttle``: add the motor to the action.
-    ``track``: a name (``tracks.NAMED_TRACKS``), a generator seed (int ≥ 0), a ``Track``,
+    ``track``: a name (``tfalda_sim.tracks.NAMED_TRACKS``), a generator seed (int ≥ 0), a ``Track``,
     or ``None`` for a new generated track each reset with a seed drawn from
     ``track_seeds``, a pair ``(low, high)`` of ints, ``0 ≤ low < high ≤ 2**63`` (the seed
     is the scenario id: train/test splits are seed ranges). ``obstacles``: keep the
@@ -282,7 +282,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
                                       "a tfalda_sim.rendering.Effects") or Effects()
         self.detector_config = resolve_detector(detector)
         self.reward_weights = check_optional("reward", reward, RewardWeights,
-                                             "an envs.RewardWeights") or RewardWeights()
+                                             "an tfalda_sim.envs.RewardWeights") or RewardWeights()
         self.default_faults = check_faults("faults", faults)
         self.track_spec = track
         if track is not None:

@@ -5,8 +5,7 @@ from __future__ import annotations
 import functools
 
 import pytest
-
-from tracks import Track, generate
+from tfalda_sim.tracks import Track, generate
 
 
 @functools.cache

@@ -54,11 +54,11 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
+from tfalda_sim.tracks.named import named_path
 
 from tests.cli_helpers import leaf_commands
 from tfalda_sim.cli import build_parser, main
 from tfalda_sim.parallel import available_cpus
-from tracks.named import named_path
 
 BUDGET_S = 1.5
 """Wall time an example may work before its simulated Ctrl-C [s]."""
@@ -340,7 +340,7 @@ def _is_temporary(rel: str) -> bool:
 
 EVALUATE_AGENT_SWALLOWS_CTRL_C = False
 """Known bug (``test_evaluate_agent_stops_at_ctrl_c_with_one_worker``): with one worker
-``evaluate-agent`` drives in-process and ``agents.drive.drive`` catches the Ctrl-C, so
+``evaluate-agent`` drives in-process and ``tfalda_sim.agents.drive.drive`` catches the Ctrl-C, so
 the interrupted drive is scored as a failed seed and the sweep goes on. Set to False
 once fixed: the fuzz then checks evaluate-agent's Ctrl-C too."""
 
@@ -627,9 +627,10 @@ def argvs(command: tuple[str, ...]) -> st.SearchStrategy[list[str]]:
 def _warm_up() -> None:
     """Load the numba kernels, matplotlib, torch and stable-baselines3 once, untimed: a
     Ctrl-C landing in the middle of a first import would test the test, not the CLI."""
-    for module in ("agents.drive", "agents.evaluate", "agents.stress",
+    for module in ("tfalda_sim.agents.drive", "tfalda_sim.agents.evaluate",
+                   "tfalda_sim.agents.stress",
                    "tfalda_sim.evaluation.baseline", "tfalda_sim.evaluation.charts",
-                   "tfalda_sim.evaluation.sweep", "stable_baselines3", "agents.train"):
+                   "tfalda_sim.evaluation.sweep", "stable_baselines3", "tfalda_sim.agents.train"):
         with contextlib.suppress(ImportError):  # the rl extra may be missing
             importlib.import_module(module)
 
@@ -735,15 +736,15 @@ def test_train_keeps_an_earlier_runs_tensorboard_logs(tmp_path: Path,
     DIR/tb/PPO_1, deleting an earlier run's. PPO is shrunk to one 64-step rollout so the
     run takes a few seconds."""
     pytest.importorskip("stable_baselines3", reason="train needs the rl extra")
-    import agents.train
+    import tfalda_sim.agents.train
 
     @dataclass(frozen=True)
-    class TinyPpo(agents.train.PpoConfig):
+    class TinyPpo(tfalda_sim.agents.train.PpoConfig):
         n_steps: int = 64
         batch_size: int = 64
         n_epochs: int = 1
 
-    monkeypatch.setattr(agents.train, "PpoConfig", TinyPpo)
+    monkeypatch.setattr(tfalda_sim.agents.train, "PpoConfig", TinyPpo)
     old = tmp_path / "run" / "tb" / "PPO_1" / "events.out.tfevents.earlier-run"
     old.parent.mkdir(parents=True)
     old.write_bytes(b"an earlier run's logs")
@@ -767,7 +768,8 @@ def test_train_keeps_an_earlier_runs_tensorboard_logs(tmp_path: Path,
 
 
 @pytest.mark.xfail(EVALUATE_AGENT_SWALLOWS_CTRL_C, strict=True,
-                   reason="evaluate-agent with one worker: agents.drive.drive catches the "
+                   reason="evaluate-agent with one worker: tfalda_sim.agents.drive.drive "
+                          "catches the "
                           "Ctrl-C, the drive is scored as a failed seed, the sweep goes on, "
                           "exit 0")
 def test_evaluate_agent_stops_at_ctrl_c_with_one_worker(baseline: dict[str, Entry]) -> None:

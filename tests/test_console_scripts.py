@@ -26,9 +26,9 @@ from typing import Any, TypeVar
 
 import cv2
 import pytest
+from tfalda_sim.tracks import NAMED_TRACKS, load_track
 
 from tests.cli_helpers import command_tree, leaf_commands
-from tracks import NAMED_TRACKS, load_track
 
 SCRIPT: str | None = shutil.which("tfalda-sim", path=str(Path(sys.executable).parent))
 """The console script of the interpreter running the tests (None: not installed)."""
@@ -257,7 +257,7 @@ def test_replay(drive_run: tuple[Run, Path]) -> None:
 
 @covers("stress")
 def test_stress(tmp_path: Path) -> None:
-    from agents.stress import REPORT_FILES
+    from tfalda_sim.agents.stress import REPORT_FILES
 
     doc = tfalda("stress", "--seeds", "10003:10004", "--faults", "none", "--workers", "1",
                  "--out", "DIR", "--json", cwd=tmp_path).json()

@@ -21,7 +21,7 @@ def register_envs() -> None:
     import gymnasium
 
     if ENV_ID not in gymnasium.registry:
-        gymnasium.register(id=ENV_ID, entry_point="envs.tfalda_track:TfaldaTrackEnv",
+        gymnasium.register(id=ENV_ID, entry_point="tfalda_sim.envs.tfalda_track:TfaldaTrackEnv",
                            max_episode_steps=MAX_EPISODE_STEPS)
 
 

@@ -21,7 +21,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from agents.command import (
+from tfalda_sim.agents.command import (
     add_drive_parser,
     add_evaluate_agent_parser,
     add_stress_parser,
@@ -38,12 +38,12 @@ from tfalda_sim.cli_common import (
     seed_arg,
 )
 from tfalda_sim.outputs import OutputError, Outputs
-from tracks.fileformat import TrackFileError, load_track, save_track
-from tracks.generator import GeneratorParams, generate
-from tracks.model import Track
-from tracks.named import NAMED_TRACKS, named_path
-from tracks.preview import write_preview
-from tracks.rules import MAT_EDGE_MARGIN_M, Violation, validate
+from tfalda_sim.tracks.fileformat import TrackFileError, load_track, save_track
+from tfalda_sim.tracks.generator import GeneratorParams, generate
+from tfalda_sim.tracks.model import Track
+from tfalda_sim.tracks.named import NAMED_TRACKS, named_path
+from tfalda_sim.tracks.preview import write_preview
+from tfalda_sim.tracks.rules import MAT_EDGE_MARGIN_M, Violation, validate
 
 from .evaluation.command import add_compare_parser, add_evaluate_parser
 from .replay import add_replay_parser

@@ -17,7 +17,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from tracks import Gap, Line, Track
+from tfalda_sim.tracks import Gap, Line, Track
 
 
 def _check(fault: object) -> None:
@@ -119,7 +119,8 @@ class MarkingGap:
         if self.length_m <= 0:
             raise ValueError(f"MarkingGap.length_m must be > 0, got {self.length_m}")
         if not self.lines or not all(isinstance(v, Line) for v in self.lines):
-            raise ValueError(f"MarkingGap.lines must be tracks.Line members, got {self.lines}")
+            raise ValueError(f"MarkingGap.lines must be tfalda_sim.tracks.Line members, got "
+                             f"{self.lines}")
 
 
 Fault = Blackout | Overexposure | Glare | CameraShake | LateralKick | MarkingGap

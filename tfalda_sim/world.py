@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import pymunk
 
-from tracks import Track
-from tracks.rules import obstacle_corners
+from tfalda_sim.tracks import Track
+from tfalda_sim.tracks.rules import obstacle_corners
 
 from .camera import FRAME_RATE_HZ
 from .vehicle import CarParams, motor_step, servo_step, yaw_rate

@@ -23,7 +23,7 @@ import numpy as np
 try:  # the installed namespace (issue 16) …
     from tfalda_sim.tracks import generate, load_named
 except ImportError:  # … or the top-level packages before it
-    from tracks import generate, load_named  # type: ignore[no-redef]
+    from tfalda_sim.tracks import generate, load_named  # type: ignore[no-redef]
 
 
 def _h(*arrays: Any) -> str:
@@ -120,8 +120,8 @@ def drive() -> dict[str, str]:
         from tfalda_sim.agents.drive import drive as run_drive
         from tfalda_sim.agents.pid import LanePid
     except ImportError:
-        from agents.drive import drive as run_drive  # type: ignore[no-redef]
-        from agents.pid import LanePid  # type: ignore[no-redef]
+        from tfalda_sim.agents.drive import drive as run_drive  # type: ignore[no-redef]
+        from tfalda_sim.agents.pid import LanePid  # type: ignore[no-redef]
     track = replace(generate(7), obstacles=())
     res = run_drive(LanePid(), track, laps=1, max_steps=300)
     s = res.summary()

@@ -5,9 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import cv2
-
-from agents.oracle import OracleAgent
-from envs import TfaldaTrackEnv
+from tfalda_sim.agents.oracle import OracleAgent
+from tfalda_sim.envs import TfaldaTrackEnv
 
 OUT = Path(__file__).resolve().parent.parent / "docs" / "env-render.png"
 

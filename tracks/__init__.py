@@ -1,5 +1,13 @@
 """Carolo-Cup tracks: model, rules, generator, files, rasterisation."""
 
+if __name__ != "tfalda_sim.tracks":  # pragma: no cover - a set-up error, checked in tests
+    # The repository root on sys.path makes this folder importable as a top-level
+    # `tracks` too; two names for one package would split its state and its numba cache.
+    raise ImportError("tfalda-sim's tracks package is tfalda_sim.tracks; import it under that "
+                      "name (the repository root is on sys.path ahead of the installed "
+                      "package)")
+
+
 from .fileformat import TrackFileError, load_track, save_track
 from .generator import GeneratorParams, generate
 from .model import Arc, Gap, Intersection, Lane, Line, Location, Obstacle, Pose, Straight, Track

@@ -23,7 +23,7 @@ Unknown keys are errors (a typo must not be silently ignored). Floats are writte
 Python's shortest round-trip repr, so ``load(save(track)) == track`` exactly.
 
 A hostile file must not cost more than a few seconds or megabytes: the ``MAX_*`` limits
-below (and ``tracks.model.MAX_TRACK_LENGTH_M`` / ``MAX_LANE_WIDTH_M``) are checked before
+below (and ``tfalda_sim.tracks.model.MAX_TRACK_LENGTH_M`` / ``MAX_LANE_WIDTH_M``) are checked before
 anything proportional to the size is allocated, with an error naming field and limit.
 """
 
@@ -206,12 +206,13 @@ class _Limit:
 
 
 _EXTENT = _Limit(MAX_MAT_EXTENT_M, "m", "the largest mat extent",
-                 "tracks.fileformat.MAX_MAT_EXTENT_M")
+                 "tfalda_sim.tracks.fileformat.MAX_MAT_EXTENT_M")
 _TRACK_LENGTH = _Limit(MAX_TRACK_LENGTH_M, "m", "the largest track length",
-                       "tracks.model.MAX_TRACK_LENGTH_M")
+                       "tfalda_sim.tracks.model.MAX_TRACK_LENGTH_M")
 _HEADING = _Limit(MAX_HEADING_RAD, "rad", "the largest heading",
-                  "tracks.fileformat.MAX_HEADING_RAD")
-_LANE_WIDTH = _Limit(MAX_LANE_WIDTH_M, "m", "the widest lane", "tracks.model.MAX_LANE_WIDTH_M")
+                  "tfalda_sim.tracks.fileformat.MAX_HEADING_RAD")
+_LANE_WIDTH = _Limit(MAX_LANE_WIDTH_M, "m", "the widest lane",
+                     "tfalda_sim.tracks.model.MAX_LANE_WIDTH_M")
 
 
 class _Reader:
@@ -298,7 +299,7 @@ class _Reader:
             self.fail(f"must be a list, got {_kind(v)}", key)
         if limit is not None and len(v) > limit:
             self.fail(f"{len(v)} entries exceed the largest number of {key} {limit} "
-                      f"(tracks.fileformat.{limit_name})", key)
+                      f"(tfalda_sim.tracks.fileformat.{limit_name})", key)
         return v
 
     def child(self, obj: Any, key: str, allowed: set[str]) -> _Reader:
@@ -322,7 +323,7 @@ def _segment(r: _Reader, raw: Any, i: int, before_m: float) -> Straight | Arc:
             seg.fail(f"must be > 0, got {radius}", "radius_m")
         if radius < MIN_RADIUS_M:
             seg.fail(f"{radius:g} m is below the smallest arc radius {MIN_RADIUS_M:g} m "
-                     "(tracks.fileformat.MIN_RADIUS_M)", "radius_m")
+                     "(tfalda_sim.tracks.fileformat.MIN_RADIUS_M)", "radius_m")
         seg.within("radius_m", radius, _EXTENT)
         if not 0 < abs(angle) <= 2 * math.pi:
             seg.fail(f"must be non-zero and within ±2π, got {angle}", "angle_rad")
@@ -331,7 +332,7 @@ def _segment(r: _Reader, raw: Any, i: int, before_m: float) -> Straight | Arc:
     total = before_m + result.length_m
     if total > MAX_TRACK_LENGTH_M:
         seg.fail(f"the segments up to here add up to {total:g} m, more than the largest track "
-                 f"length {MAX_TRACK_LENGTH_M:g} m (tracks.model.MAX_TRACK_LENGTH_M)")
+                 f"length {MAX_TRACK_LENGTH_M:g} m (tfalda_sim.tracks.model.MAX_TRACK_LENGTH_M)")
     return result
 
 
@@ -435,7 +436,7 @@ def _decode(text: str, source: str) -> Any:
     if depth > MAX_JSON_DEPTH:
         raise TrackFileError(
             f"{source}: nested too deeply ({depth} levels of lists/objects; the largest JSON "
-            f"depth is {MAX_JSON_DEPTH}, tracks.fileformat.MAX_JSON_DEPTH)")
+            f"depth is {MAX_JSON_DEPTH}, tfalda_sim.tracks.fileformat.MAX_JSON_DEPTH)")
     try:
         return json.loads(text, parse_int=_parse_int, object_pairs_hook=_make_object)
     except json.JSONDecodeError as exc:
@@ -460,7 +461,7 @@ def load_track(path: str | os.PathLike[str], *, check_rules: bool = True) -> Tra
     if len(raw) > MAX_FILE_BYTES:
         raise TrackFileError(
             f"{source}: file is larger than the largest track file {MAX_FILE_BYTES} bytes "
-            "(tracks.fileformat.MAX_FILE_BYTES)")
+            "(tfalda_sim.tracks.fileformat.MAX_FILE_BYTES)")
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:

@@ -26,7 +26,7 @@ MAX_TRACK_LENGTH_M: float = 250.0
 across (generated tracks, seeds 0–999: ≤ 53 m; the named ones: ≤ 42 m), so 250 m is a
 margin of almost five. Everything laid out per metre of road (rule-check samples every
 5 cm, the spatial index, map pixels) is proportional to it; with
-``tracks.fileformat.MAX_SEGMENTS`` it bounds the rule check's time to a few seconds."""
+``tfalda_sim.tracks.fileformat.MAX_SEGMENTS`` it bounds the rule check's time to a few seconds."""
 
 MAX_LANE_WIDTH_M: float = 1.0
 """Widest lane [m]: 2.5 × the rules' ≈ 0.40 m (``validate`` accepts 0.35–0.45 m). The
@@ -168,7 +168,7 @@ class Track:
 
     ``closed`` tracks are circuits (the chain must end where it starts); open tracks are
     test strips. Whether the track obeys the rules is checked by
-    ``tracks.rules.validate``; the constructor only rejects values that have no geometric
+    ``tfalda_sim.tracks.rules.validate``; the constructor only rejects values that have no geometric
     meaning (negative lengths, zero radius, NaN).
     """
 
@@ -207,12 +207,13 @@ class Track:
         if total_m > MAX_TRACK_LENGTH_M:
             raise ValueError(
                 f"track too large: its segments add up to {total_m:g} m, more than the largest "
-                f"track length {MAX_TRACK_LENGTH_M:g} m (tracks.model.MAX_TRACK_LENGTH_M)")
+                f"track length {MAX_TRACK_LENGTH_M:g} m "
+                "(tfalda_sim.tracks.model.MAX_TRACK_LENGTH_M)")
         _finite_positive(self.lane_width_m, "lane_width_m")
         if self.lane_width_m > MAX_LANE_WIDTH_M:
             raise ValueError(
                 f"lane_width_m {self.lane_width_m:g} m is wider than the widest lane "
-                f"{MAX_LANE_WIDTH_M:g} m (tracks.model.MAX_LANE_WIDTH_M)")
+                f"{MAX_LANE_WIDTH_M:g} m (tfalda_sim.tracks.model.MAX_LANE_WIDTH_M)")
         for v, what in ((self.start.x_m, "start.x_m"), (self.start.y_m, "start.y_m"),
                         (self.start.heading_rad, "start.heading_rad")):
             if not math.isfinite(v):

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from agents.drive import drive, make_agent
-from agents.pid import LanePid
-from envs import TfaldaTrackEnv
-from tracks import load_named
+from tfalda_sim.agents.drive import drive, make_agent
+from tfalda_sim.agents.pid import LanePid
+from tfalda_sim.envs import TfaldaTrackEnv
+from tfalda_sim.tracks import load_named
 
 
 def test_lane_geometry_from_the_lanes_matches_the_truth() -> None:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from agents.stress import FAULTS, markdown_table, run_one, summarise
+from tfalda_sim.agents.stress import FAULTS, markdown_table, run_one, summarise
 
 
 def test_blackout_triggers_the_reset_and_the_lanes_recover() -> None:
@@ -26,8 +26,7 @@ def test_summary_table_has_one_row_per_fault_and_stage() -> None:
 
 def test_the_tally_gives_numpys_median_and_the_rates() -> None:
     import numpy as np
-
-    from agents.stress import StressRun, StressTally
+    from tfalda_sim.agents.stress import StressRun, StressTally
 
     rng = np.random.default_rng(1)
     for n in (1, 2, 5, 10, 37):
@@ -47,7 +46,7 @@ def test_the_tally_gives_numpys_median_and_the_rates() -> None:
 def test_battery_jobs_are_lazy_and_seed_by_seed() -> None:
     from itertools import islice
 
-    from agents.stress import battery_jobs
+    from tfalda_sim.agents.stress import battery_jobs
 
     jobs = battery_jobs(range(10**8), ["none", "blackout"])
     assert list(islice(jobs, 5)) == [(0, "none", True), (0, "none", False),

@@ -7,10 +7,9 @@ import json
 import numpy as np
 import torch
 from stable_baselines3 import PPO
-
-from agents.drive import PpoAgent
-from agents.train import PpoConfig, train
-from envs import TfaldaTrackEnv
+from tfalda_sim.agents.drive import PpoAgent
+from tfalda_sim.agents.train import PpoConfig, train
+from tfalda_sim.envs import TfaldaTrackEnv
 
 
 def mean_return(policy: PpoAgent, episodes: int = 3, steps: int = 300) -> float:

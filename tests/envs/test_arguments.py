@@ -10,10 +10,10 @@ import types
 import gymnasium as gym
 import numpy as np
 import pytest
+from tfalda_sim.envs import RewardWeights, TfaldaTrackEnv
+from tfalda_sim.envs._checks import show
 
 import tfalda_sim  # noqa: F401  (registers TfaldaTrack-v0)
-from envs import RewardWeights, TfaldaTrackEnv
-from envs._checks import show
 from tfalda_sim.faults import Blackout, LateralKick
 from tfalda_sim.perception import DetectorConfig
 from tfalda_sim.rendering import DomainRandomization, Effects
@@ -188,7 +188,7 @@ BAD_OPTIONS = [
     # (option, value, exception, what the message says is accepted[, what it shows])
     ("track", 2.5, TypeError, "generator seed"),
     ("track", "ovl", ValueError, "oval"),
-    ("track", [1], TypeError, "tracks.Track"),
+    ("track", [1], TypeError, "tfalda_sim.tracks.Track"),
     ("start", "abc", TypeError, "three finite real numbers"),
     ("start", (1.0, 2.0), ValueError, "three"),
     ("start", (True, 0.0, 0.0), TypeError, "real numbers"),

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
+from tfalda_sim.envs.observation import STATES, lane_vector, lane_vector_bounds, lane_vector_names
 
-from envs.observation import STATES, lane_vector, lane_vector_bounds, lane_vector_names
 from tfalda_sim.perception import LaneObservation, StateKind
 
 

@@ -96,10 +96,12 @@ COMMANDS = {
                      "tfalda_sim.rendering.Renderer"),
     "render --truth": (["render", "--track", "oval", "--s", "1", "--out", "{tmp}/ok.png"],
                        "--truth", ".png", "tfalda_sim.rendering.Renderer"),
-    "drive --video": (["drive", "--track", "oval"], "--video", ".mp4", "agents.drive.drive"),
+    "drive --video": (["drive", "--track", "oval"], "--video", ".mp4",
+                      "tfalda_sim.agents.drive.drive"),
     "drive --camera-video": (["drive", "--track", "oval"], "--camera-video", ".mp4",
-                             "agents.drive.drive"),
-    "stress --out": (["stress", "--seeds", "1:2"], "--out", "", "agents.stress.iter_battery"),
+                             "tfalda_sim.agents.drive.drive"),
+    "stress --out": (["stress", "--seeds", "1:2"], "--out", "",
+                     "tfalda_sim.agents.stress.iter_battery"),
     "evaluate --plot": (["evaluate", "--scenario", "straight"], "--plot", ".png",
                         "tfalda_sim.evaluation.command.run_scenario"),
     "evaluate --xml": (["evaluate", "--scenario", "straight"], "--xml", ".xml",
@@ -111,8 +113,8 @@ COMMANDS = {
     "compare --out": (["compare", "--no-generated"], "--out", "",
                       "tfalda_sim.evaluation.baseline.iter_compare"),
     "evaluate-agent --out": (["evaluate-agent", "--seeds", "1:2"], "--out", ".json",
-                             "agents.evaluate.evaluate"),
-    "train --out": (["train", "--timesteps", "10"], "--out", "", "agents.train.train"),
+                             "tfalda_sim.agents.evaluate.evaluate"),
+    "train --out": (["train", "--timesteps", "10"], "--out", "", "tfalda_sim.agents.train.train"),
 }
 
 

@@ -111,7 +111,7 @@ def test_unreadable_files_get_a_clear_error(tmp_path: Path) -> None:
 @pytest.fixture(scope="module")
 def camera_video(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Six camera frames of the simulator on the oval's straight (env.camera_frame)."""
-    from envs import TfaldaTrackEnv
+    from tfalda_sim.envs import TfaldaTrackEnv
 
     env = TfaldaTrackEnv(track="oval")
     env.reset(seed=0, options={"start": (0.5, -0.2, 0.0)})

@@ -7,10 +7,10 @@ import pickle
 
 import numpy as np
 import pytest
+from tfalda_sim.tracks import load_named
 
 from tests.conftest import generated
 from tfalda_sim.world import PHYSICS_STEPS_PER_FRAME, World
-from tracks import load_named
 
 
 def lane_start(track, s: float, lateral: float | None = None) -> tuple[float, float, float]:

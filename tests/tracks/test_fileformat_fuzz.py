@@ -23,12 +23,19 @@ from typing import Any
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
+from tfalda_sim.tracks import (
+    NAMED_TRACKS,
+    Track,
+    TrackFileError,
+    load_named,
+    load_track,
+    save_track,
+)
+from tfalda_sim.tracks.fileformat import MAX_SEGMENTS, track_to_dict
+from tfalda_sim.tracks.model import MAX_TRACK_LENGTH_M
 
 from tests.conftest import generated
 from tests.tracks.test_fileformat_limits import address_space_cap
-from tracks import NAMED_TRACKS, Track, TrackFileError, load_named, load_track, save_track
-from tracks.fileformat import MAX_SEGMENTS, track_to_dict
-from tracks.model import MAX_TRACK_LENGTH_M
 
 FUZZ = settings(
     derandomize=True,
@@ -157,8 +164,8 @@ def answer(workdir: Path, content: bytes) -> Track | TrackFileError:
         assert rules or len(message) < 1000  # never a dump of the input
         # --hypothesis-show-statistics tells how deep the inputs got.
         event("refused: " + ("rules" if rules else "JSON" if "JSON" in message else
-                             "limit" if "tracks.fileformat.MAX" in message
-                             or "tracks.model.MAX" in message else "schema"))
+                             "limit" if "tfalda_sim.tracks.fileformat.MAX" in message
+                             or "tfalda_sim.tracks.model.MAX" in message else "schema"))
         return exc
     event("accepted")
     assert track.length_m <= MAX_TRACK_LENGTH_M and len(track.segments) <= MAX_SEGMENTS

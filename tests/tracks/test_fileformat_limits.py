@@ -15,11 +15,15 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-
-from tests.conftest import generated
-from tfalda_sim.cli import main
-from tracks import NAMED_TRACKS, TrackFileError, load_named, load_track, rasterize, validate
-from tracks.fileformat import (
+from tfalda_sim.tracks import (
+    NAMED_TRACKS,
+    TrackFileError,
+    load_named,
+    load_track,
+    rasterize,
+    validate,
+)
+from tfalda_sim.tracks.fileformat import (
     MAX_FILE_BYTES,
     MAX_GAPS,
     MAX_INTERSECTIONS,
@@ -28,7 +32,10 @@ from tracks.fileformat import (
     MAX_SEGMENTS,
     save_track,
 )
-from tracks.model import MAX_LANE_WIDTH_M, MAX_TRACK_LENGTH_M, Arc, Straight, Track
+from tfalda_sim.tracks.model import MAX_LANE_WIDTH_M, MAX_TRACK_LENGTH_M, Arc, Straight, Track
+
+from tests.conftest import generated
+from tfalda_sim.cli import main
 
 GiB = 1024**3
 
@@ -93,7 +100,7 @@ def test_a_1e7_m_straight_is_refused_before_anything_is_laid_out(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = write(tmp_path / "t.json", strip_doc(1e7))
     expected = (f"{path}: segments[0].length_m: 1e+07 m exceeds the largest track length "
-                "250 m (tracks.model.MAX_TRACK_LENGTH_M)")
+                "250 m (tfalda_sim.tracks.model.MAX_TRACK_LENGTH_M)")
     assert refused(path, "largest track length") == expected
     assert cli_error(path, capsys) == f"error: {expected}\n"
 
@@ -157,7 +164,7 @@ def test_list_lengths_are_checked_before_the_first_element(
     doc[key] = [0] * (limit + 1)  # not even objects: the count is refused first
     refused(write(tmp_path / "t.json", doc),
             rf"{key}: {limit + 1} entries exceed the largest number of {key} {limit} "
-            rf"\(tracks.fileformat.{name}\)")
+            rf"\(tfalda_sim.tracks.fileformat.{name}\)")
     doc[key] = [0] * limit  # at the limit, the elements themselves are read
     refused(write(tmp_path / "t.json", doc), rf"{key}\[0\]: must be an object")
 
@@ -223,10 +230,10 @@ def test_nesting_up_to_the_limit_is_not_refused_for_depth(tmp_path: Path) -> Non
     (lambda d: d["segments"][0].update(length_m=True), r"length_m: must be a number, got true"),
     (lambda d: d.update(lane_width_m=False), r"lane_width_m: must be a number, got false"),
     (lambda d: d.update(lane_width_m=3.0),
-     r"lane_width_m: 3 m exceeds the widest lane 1 m \(tracks.model.MAX_LANE_WIDTH_M\)"),
+     r"lane_width_m: 3 m exceeds the widest lane 1 m \(tfalda_sim.tracks.model.MAX_LANE_WIDTH_M\)"),
     (lambda d: d["start"].update(x_m=-5000.0),
      r"start.x_m: \|-5000\| m exceeds the largest mat extent 1000 m "
-     r"\(tracks.fileformat.MAX_MAT_EXTENT_M\)"),
+     r"\(tfalda_sim.tracks.fileformat.MAX_MAT_EXTENT_M\)"),
     (lambda d: d["start"].update(heading_rad=1e9),
      r"start.heading_rad: 1e\+09 rad exceeds the largest heading 100 rad"),
     (lambda d: d.update(segments=[{"type": "arc", "radius_m": 1e-310, "angle_rad": 1.0}]),
@@ -291,7 +298,7 @@ def test_an_in_memory_track_beyond_the_longest_is_refused_by_validate_and_raster
     for check in (validate, rasterize):
         with address_space_cap(), pytest.raises(
                 ValueError, match=r"track too large: .* 1e\+07 m, more than the largest track "
-                                  r"length 250 m \(tracks.model.MAX_TRACK_LENGTH_M\)"):
+                                  r"length 250 m \(tfalda_sim.tracks.model.MAX_TRACK_LENGTH_M\)"):
             check(Track((Straight(1e7),), closed=False))
     with pytest.raises(ValueError, match="MAX_TRACK_LENGTH_M"):
         Track((Straight(200.0), Arc(20.0, 3.0)), closed=False)

@@ -6,8 +6,7 @@ import math
 
 import numpy as np
 import pytest
-
-from tracks import Arc, GeneratorParams, generate, validate
+from tfalda_sim.tracks import Arc, GeneratorParams, generate, validate
 
 
 def test_ten_thousand_consecutive_seeds_give_valid_tracks() -> None:
@@ -75,7 +74,7 @@ def test_bad_parameters_are_refused(kwargs: dict, match: str) -> None:
 
 
 def test_a_legal_other_lane_width_generates_a_valid_track() -> None:
-    from tracks.rules import validate
+    from tfalda_sim.tracks.rules import validate
 
     track = generate(5, GeneratorParams(lane_width_m=0.44, radius_m=(1.5, 4.0)))
     assert track.lane_width_m == 0.44 and validate(track) == []

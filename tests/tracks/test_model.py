@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from tfalda_sim.tracks import Arc, Lane, Pose, Straight, Track, load_named
+from tfalda_sim.tracks.geometry import project
 
 from tests.conftest import generated
-from tracks import Arc, Lane, Pose, Straight, Track, load_named
-from tracks.geometry import project
 
 segment = st.one_of(
     st.builds(Straight, st.floats(0.05, 6.0)),
@@ -155,7 +155,7 @@ def test_heading_at_equals_the_vectorised_heading(eight) -> None:
 
 def test_a_gap_of_negative_length_is_refused() -> None:
     """Found by the track-file fuzz: validate() crashed with a KeyError on one."""
-    from tracks.model import Gap, Line
+    from tfalda_sim.tracks.model import Gap, Line
 
     with pytest.raises(ValueError, match="gap's length_m must be ≥ 0"):
         Gap(Line.RIGHT, 1.0, -0.1)

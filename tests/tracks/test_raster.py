@@ -7,9 +7,18 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
-from tracks import VIRTUAL, Gap, Line, Marking, Pose, Straight, Track, load_named, rasterize
-from tracks.rules import LINE_WIDTH_M
+from tfalda_sim.tracks import (
+    VIRTUAL,
+    Gap,
+    Line,
+    Marking,
+    Pose,
+    Straight,
+    Track,
+    load_named,
+    rasterize,
+)
+from tfalda_sim.tracks.rules import LINE_WIDTH_M
 
 
 def strip(heading: float = 0.0, **kw) -> Track:

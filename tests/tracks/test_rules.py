@@ -6,9 +6,7 @@ import math
 from dataclasses import replace
 
 import pytest
-
-from tests.conftest import generated
-from tracks import (
+from tfalda_sim.tracks import (
     Arc,
     Gap,
     Intersection,
@@ -20,7 +18,9 @@ from tracks import (
     load_named,
     validate,
 )
-from tracks.rules import min_centre_radius_m, min_road_clearance_m
+from tfalda_sim.tracks.rules import min_centre_radius_m, min_road_clearance_m
+
+from tests.conftest import generated
 
 
 def rules_of(track: Track) -> list[str]:

@@ -17,8 +17,8 @@ import math
 import numpy as np
 from numba import njit
 
-from tracks import Track
-from tracks.rules import LINE_WIDTH_M
+from tfalda_sim.tracks import Track
+from tfalda_sim.tracks.rules import LINE_WIDTH_M
 
 from ..rendering import PixelGeometry
 from .metrics import EPSILON_PX

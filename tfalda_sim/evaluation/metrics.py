@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from tracks import Marking
+from tfalda_sim.tracks import Marking
 
 from ..rendering.truth import FrameTruth
 

@@ -1,7 +1,7 @@
 """The thesis' test cases (section 4.1.1) and generated-track scenarios.
 
 The seed is the scenario id: ``generated_scenario(seed)`` drives one lap of
-``tracks.generate(seed)``, so evaluation splits are seed ranges.
+``tfalda_sim.tracks.generate(seed)``, so evaluation splits are seed ranges.
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import enum
 import math
 from dataclasses import dataclass
 
-from tracks import Track, generate, load_named
-from tracks.generator import GeneratorParams
+from tfalda_sim.tracks import Track, generate, load_named
+from tfalda_sim.tracks.generator import GeneratorParams
 
 from ..rendering import Effects
 from .trajectory import FRAME_RATE_HZ, Trajectory, lane_length_m
@@ -97,7 +97,7 @@ def generated_scenario(seed: int, *, params: GeneratorParams | None = None,
                        speed_m_s: float = THESIS_SPEED_M_S, stride: int = 1,
                        fps: float = FRAME_RATE_HZ, laps: float = 1.0,
                        max_frames: int | None = None) -> Scenario:
-    """``laps`` laps of ``tracks.generate(seed, params)`` on the ideal line of the right
+    """``laps`` laps of ``tfalda_sim.tracks.generate(seed, params)`` on the ideal line of the right
     lane from the start line, cartons removed (the thesis' test cases have no objects on
     the road); ``max_frames`` cuts the drive short."""
     if not (math.isfinite(laps) and laps > 0):

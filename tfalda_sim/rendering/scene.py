@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from tracks import MarkingMap, Track, rasterize
-from tracks.rules import obstacle_corners
+from tfalda_sim.tracks import MarkingMap, Track, rasterize
+from tfalda_sim.tracks.rules import obstacle_corners
 
 from .effects import Effects
 

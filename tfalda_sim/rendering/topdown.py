@@ -8,8 +8,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from tracks import Track
-from tracks.rules import obstacle_corners
+from tfalda_sim.tracks import Track
+from tfalda_sim.tracks.rules import obstacle_corners
 
 from ..vehicle import CarParams
 

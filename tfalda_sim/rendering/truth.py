@@ -2,7 +2,7 @@
 
 The thesis painted every marking of its test images by hand, the dashed centre line as a
 continuous one (ch. 4); here each visible marking is projected from the track model. The
-label image uses ``tracks.Marking`` ids; the ego lane's two boundaries (the centre line
+label image uses ``tfalda_sim.tracks.Marking`` ids; the ego lane's two boundaries (the centre line
 and the right side line) come as pixel polylines, the reference for a lane detector.
 """
 
@@ -15,8 +15,13 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from tracks import Marking, Track
-from tracks.rules import LINE_WIDTH_M, START_LINE_WIDTH_M, STOP_LINE_WIDTH_M, obstacle_corners
+from tfalda_sim.tracks import Marking, Track
+from tfalda_sim.tracks.rules import (
+    LINE_WIDTH_M,
+    START_LINE_WIDTH_M,
+    STOP_LINE_WIDTH_M,
+    obstacle_corners,
+)
 
 from ..camera import FisheyeCamera
 from .renderer import Bonnet, BoxFaces, obstacle_faces

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from tfalda_sim.tracks import load_named
 
 from tfalda_sim.evaluation import score_frame, truth_distance
 from tfalda_sim.evaluation.metrics import (
@@ -17,7 +18,6 @@ from tfalda_sim.evaluation.metrics import (
 )
 from tfalda_sim.perception.params import INITIAL_ROIS
 from tfalda_sim.rendering import FrameTruth, Renderer, frame_truth
-from tracks import load_named
 
 
 @pytest.fixture(scope="module")
@@ -89,7 +89,7 @@ def test_a_lane_on_the_wrong_marking_hits_but_is_a_false_positive(
 
 def _left_line(truth: FrameTruth) -> np.ndarray:
     """Pixels of the opposite lane's outer line, as a polyline from the car outwards."""
-    from tracks import Marking
+    from tfalda_sim.tracks import Marking
 
     ys, xs = np.nonzero(truth.labels == int(Marking.LEFT_LINE))
     rows = np.unique(ys)

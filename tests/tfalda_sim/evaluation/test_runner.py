@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tfalda_sim.tracks import load_named
 
 from tfalda_sim.evaluation import (
     LOW_CONFIDENCE,
@@ -25,7 +26,6 @@ from tfalda_sim.evaluation import (
 from tfalda_sim.evaluation.scenarios import THESIS_SPEED_M_S
 from tfalda_sim.perception import DetectorConfig
 from tfalda_sim.rendering import Effects, Renderer
-from tracks import load_named
 
 CONFIGS = {WITH_LIS: DetectorConfig.thesis(), WITHOUT_LIS: DetectorConfig.without_lis()}
 
@@ -115,7 +115,7 @@ def test_thesis_scenarios_have_the_thesis_frame_numbers() -> None:
 def test_generated_scenarios_drop_the_cartons_and_keep_the_geometry() -> None:
     sc = generated_scenario(5, max_frames=40)
     assert sc.track.obstacles == () and sc.seed == 5 and len(sc.trajectory) == 40
-    from tracks import generate
+    from tfalda_sim.tracks import generate
 
     assert sc.track.segments == generate(5).segments
     full = generated_scenario(5)

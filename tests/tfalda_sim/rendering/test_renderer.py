@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from tfalda_sim.tracks import Marking, Track, load_named
 
 from tests.conftest import generated
 from tfalda_sim.rendering import (
@@ -18,7 +19,6 @@ from tfalda_sim.rendering import (
     frame_truth,
 )
 from tfalda_sim.rendering.renderer import BoxFaces, obstacle_faces
-from tracks import Marking, Track, load_named
 
 ROIS = [(195, 260, 150, 75), (365, 260, 150, 75), (80, 340, 180, 85), (429, 340, 180, 85)]
 

@@ -1,0 +1,87 @@
+"""One installed namespace: the wheel holds ``tfalda_sim`` only, and foreign top-level
+``agents``, ``envs`` and ``tracks`` packages first on ``sys.path`` change nothing."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPT = str(Path(sys.executable).with_name("tfalda-sim"))
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("wheel")
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "-w",
+                    str(out), str(ROOT)], check=True, capture_output=True)
+    (whl,) = out.glob("tfalda_sim-*.whl")
+    return whl
+
+
+def test_the_wheel_installs_one_top_level_package(wheel: Path) -> None:
+    with zipfile.ZipFile(wheel) as zf:
+        names = zf.namelist()
+        tops = {n.split("/", 1)[0] for n in names}
+        info = [n for n in names if n.endswith(".dist-info/top_level.txt")]
+        top_level = zf.read(info[0]).decode().split() if info else []
+    dist_info = {t for t in tops if t.endswith(".dist-info")}
+    assert tops - dist_info == {"tfalda_sim"}
+    assert top_level in ([], ["tfalda_sim"])
+    # The moved packages, their data and the entry point are all under tfalda_sim/.
+    for name in ("tfalda_sim/tracks/model.py", "tfalda_sim/tracks/data/oval.json",
+                 "tfalda_sim/envs/tfalda_track.py", "tfalda_sim/agents/pid.py",
+                 "tfalda_sim/agents/policies/ppo.zip", "tfalda_sim/evaluation/lanes.xsd"):
+        assert name in names, name
+
+
+FOREIGN = {
+    "agents": "MARK = 'the agents SDK'\n",
+    "envs": "MARK = 'someone else\\'s envs'\n",
+    "tracks": "MARK = 'a music library'\n",
+}
+
+
+def test_foreign_top_level_packages_do_not_shadow_ours(tmp_path: Path) -> None:
+    for name, body in FOREIGN.items():
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "__init__.py").write_text(body)
+        # a module of the same name as one of ours, to catch a mixed-up import
+        (tmp_path / name / "model.py").write_text("raise ImportError('foreign module')\n")
+    env = dict(os.environ, PYTHONPATH=str(tmp_path))
+    code = """
+import agents, envs, tracks
+assert (agents.MARK, envs.MARK, tracks.MARK) == ('the agents SDK', "someone else's envs",
+                                               'a music library')
+import gymnasium as gym
+import tfalda_sim
+env = gym.make("TfaldaTrack-v0", track="oval")
+obs, _ = env.reset(seed=0)
+for _ in range(5):
+    obs, *_ = env.step(env.action_space.sample())
+print(obs.shape[0])
+"""
+    run = subprocess.run([sys.executable, "-c", code], env=env, cwd=tmp_path,
+                         capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split()[-1] == "42"
+    cli = subprocess.run([SCRIPT, "track", "generate", "--seed", "1", "--json"], env=env,
+                         cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert cli.returncode == 0, cli.stderr
+    assert json.loads(cli.stdout)["valid"] is True
+
+
+def test_the_repository_folders_refuse_a_second_name() -> None:
+    """With the repository root on sys.path `tracks` would import as a second copy of
+    tfalda_sim.tracks (and poison numba's cache with that name): refused."""
+    for name in ("tracks", "envs", "agents"):
+        run = subprocess.run([sys.executable, "-c", f"import {name}"], cwd=ROOT,
+                             capture_output=True, text=True, timeout=120)
+        assert run.returncode != 0 and f"tfalda_sim.{name}; import it under that name" \
+            in run.stderr, run.stderr
