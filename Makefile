@@ -25,9 +25,10 @@ install: $(BIN)/.installed
 demo: install
 	$(BIN)/tfalda-sim drive --agent pid --track 7 --laps 2 --video $(OUT)/drive-7.mp4 --force
 
-# The test command CI runs (.ci/run): lint, then the whole test suite.
+# The test command CI runs (.ci/run): lint, the import contracts, the whole test suite.
 test: install
 	$(BIN)/ruff check .
+	$(BIN)/python tools/lint_imports.py
 	$(BIN)/python -m pytest -q
 
 bench: install

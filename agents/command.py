@@ -1,4 +1,5 @@
-"""``tfalda-sim drive``: an agent drives laps of a track closed-loop."""
+"""The agents' commands: ``drive`` (laps closed-loop), ``train`` (PPO), ``stress`` (the
+ROI reset logic under faults) and ``evaluate-agent`` (held-out tracks, speed sweep)."""
 
 from __future__ import annotations
 
@@ -13,20 +14,37 @@ from tqdm import tqdm
 
 from tfalda_sim.cli_common import (
     DIRECTORY,
-    SPEED_HELP,
     CliError,
+    add_force_option,
+    add_json_option,
+    add_workers_option,
     bounded_int_arg,
     check_outputs,
     interrupted,
     positive_int_arg,
     seed_arg,
     seed_range_arg,
-    speed_arg,
+    speed_arg_for,
     workers_arg_value,
 )
+from tfalda_sim.vehicle import CarParams
+
+TOP_SPEED_M_S: float = CarParams().max_speed_m_s
+"""The car's top speed: every ``--speed`` of these commands lies in (0, it] [m/s]."""
+
+speed_arg = speed_arg_for(TOP_SPEED_M_S)
+SPEED_HELP = f"cruise speed [m/s], in (0, {TOP_SPEED_M_S:g}]"
 
 
-def add_drive_parser(sub: Any) -> None:
+def register(sub: Any) -> None:
+    """Add the agents' commands to the ``tfalda-sim`` subparsers."""
+    _drive_parser(sub)
+    _train_parser(sub)
+    _stress_parser(sub)
+    _evaluate_agent_parser(sub)
+
+
+def _drive_parser(sub: Any) -> None:
     dr = sub.add_parser(
         "drive", help="drive laps with the PID or a PPO policy (closed loop)",
         description="An agent steers the car from the TFALDA + LIS lanes; prints lap times, "
@@ -44,12 +62,12 @@ def add_drive_parser(sub: Any) -> None:
     dr.add_argument("--video", type=Path, help="MP4 of the drive with ROIs, lanes and a map")
     dr.add_argument("--camera-video", type=Path,
                     help="MP4 of the bare grey camera frames (for tfalda-sim replay)")
-    dr.add_argument("--force", action="store_true", help="overwrite existing videos")
-    dr.add_argument("--json", action="store_true", help="print one JSON object")
-    dr.set_defaults(func=_cmd_drive)
+    add_force_option(dr, "existing videos")
+    add_json_option(dr)
+    dr.set_defaults(func=cmd_drive)
 
 
-def _cmd_drive(args: argparse.Namespace) -> int:
+def cmd_drive(args: argparse.Namespace) -> int:
     from .drive import drive, make_agent
 
     check_outputs({"video": args.video, "camera-video": args.camera_video},
@@ -106,7 +124,7 @@ MAX_N_ENVS: int = 64
 of MB); more than this is a typo, not a training set-up."""
 
 
-def add_train_parser(sub: Any) -> None:
+def _train_parser(sub: Any) -> None:
     tr = sub.add_parser("train", help="train a PPO steering policy (needs the rl extra)",
                         description="PPO (stable-baselines3) on vectorised TfaldaTrack-v0 envs "
                                     "over the training track seeds; TensorBoard logs, "
@@ -123,11 +141,11 @@ def add_train_parser(sub: Any) -> None:
                     help="write into a folder that holds an earlier run: its policy.zip, "
                          "train.json and same-named checkpoints are replaced, its TensorBoard "
                          "runs kept beside the new one")
-    tr.add_argument("--json", action="store_true", help="print one JSON object")
-    tr.set_defaults(func=_cmd_train)
+    add_json_option(tr)
+    tr.set_defaults(func=cmd_train)
 
 
-def _cmd_train(args: argparse.Namespace) -> int:
+def cmd_train(args: argparse.Namespace) -> int:
     try:
         import stable_baselines3  # noqa: F401
     except ImportError:
@@ -157,7 +175,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_stress_parser(sub: Any) -> None:
+def _stress_parser(sub: Any) -> None:
     from .stress import FAULTS
 
     st = sub.add_parser("stress", help="stress-test the LIS reset logic with injected faults",
@@ -170,16 +188,15 @@ def add_stress_parser(sub: Any) -> None:
                     help="generated tracks A:B")
     st.add_argument("--faults", default=",".join(FAULTS),
                     help=f"comma-separated subset of: {', '.join(FAULTS)}")
-    st.add_argument("--workers", type=positive_int_arg,
-                    help="processes (default: all CPUs; capped at the jobs, CPUs and memory)")
+    add_workers_option(st)
     st.add_argument("--out", type=Path, default=Path("out/stress"),
                     help="folder for stress.jsonl, stress.json, stress.md and stress.png")
-    st.add_argument("--force", action="store_true", help="overwrite an earlier report in --out")
-    st.add_argument("--json", action="store_true", help="print the summary as JSON")
-    st.set_defaults(func=_cmd_stress)
+    add_force_option(st, "an earlier report in --out")
+    add_json_option(st)
+    st.set_defaults(func=cmd_stress)
 
 
-def _cmd_stress(args: argparse.Namespace) -> int:
+def cmd_stress(args: argparse.Namespace) -> int:
     from tfalda_sim.outputs import Outputs
 
     from .stress import (
@@ -247,7 +264,7 @@ def _speeds_arg(text: str) -> tuple[float, ...]:
         raise argparse.ArgumentTypeError(f"--speeds: {exc}") from None
 
 
-def add_evaluate_agent_parser(sub: Any) -> None:
+def _evaluate_agent_parser(sub: Any) -> None:
     from .train import TEST_SEEDS
 
     ev = sub.add_parser(
@@ -262,15 +279,14 @@ def add_evaluate_agent_parser(sub: Any) -> None:
     ev.add_argument("--laps", type=bounded_int_arg(1, 1000), default=3)
     ev.add_argument("--speeds", type=_speeds_arg, default=(1.5,),
                     help="comma-separated cruise speeds [m/s], each in (0, top speed]")
-    ev.add_argument("--workers", type=positive_int_arg,
-                    help="processes (default: all CPUs; capped at the runs, CPUs and memory)")
+    add_workers_option(ev)
     ev.add_argument("--out", type=Path, help="also write the JSON here")
-    ev.add_argument("--force", action="store_true", help="overwrite an existing --out")
-    ev.add_argument("--json", action="store_true", help="print one JSON object")
-    ev.set_defaults(func=_cmd_evaluate_agent)
+    add_force_option(ev, "an existing --out")
+    add_json_option(ev)
+    ev.set_defaults(func=cmd_evaluate_agent)
 
 
-def _cmd_evaluate_agent(args: argparse.Namespace) -> int:
+def cmd_evaluate_agent(args: argparse.Namespace) -> int:
     from tfalda_sim.outputs import staged
 
     from .drive import make_agent

@@ -11,7 +11,6 @@ same tracks at several speeds (the speed sweep of docs/agents.md).
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Iterator
 from dataclasses import replace
 from typing import Any
@@ -89,14 +88,3 @@ def evaluate(kind: str, seeds: range, *, laps: int = 3, speeds: tuple[float, ...
         results.close()
     return {"agent": kind, "policy": policy, "laps": laps, "seeds": [seeds.start, seeds.stop],
             "speeds": summarise(runs, speeds), "runs": runs, "interrupted": stopped}
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m tfalda_sim.agents.evaluate …`` is ``tfalda-sim evaluate-agent …``."""
-    from tfalda_sim.cli import main as cli_main
-
-    return cli_main(["evaluate-agent", *(sys.argv[1:] if argv is None else argv)])
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -34,7 +34,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from tfalda_sim.tracks.rules import LANE_WIDTH_M, min_centre_radius_m
+from tfalda_sim.tracks.dimensions import LANE_WIDTH_M
+from tfalda_sim.tracks.rules import min_centre_radius_m
 
 from tfalda_sim.camera import FRAME_RATE_HZ, FisheyeCamera
 from tfalda_sim.perception.params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX

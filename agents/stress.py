@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 from tfalda_sim.envs import TfaldaTrackEnv
 from tfalda_sim.tracks import Lane, Obstacle, Track, generate
-from tfalda_sim.tracks.rules import MAX_MARKING_GAP_M
+from tfalda_sim.tracks.dimensions import MAX_MARKING_GAP_M
 from tqdm import tqdm
 
 from tfalda_sim.faults import (

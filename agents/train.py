@@ -1,9 +1,9 @@
 """PPO (stable-baselines3) on TfaldaTrack-v0's lane observations, on vectorised envs.
 
-    python -m tfalda_sim.agents.train --timesteps 1000000 --n-envs 2 --seed 0 --out runs/ppo
+    tfalda-sim train --timesteps 1000000 --n-envs 2 --seed 0 --out runs/ppo
 
-Training tracks are the generated seeds of ``TRAIN_SEEDS``; ``tfalda_sim.agents.evaluate`` tests on
-the held-out ``TEST_SEEDS``. Writes TensorBoard logs (``OUT/tb``), checkpoints
+Training tracks are the generated seeds of ``TRAIN_SEEDS``; ``tfalda-sim evaluate-agent``
+tests on the held-out ``TEST_SEEDS``. Writes TensorBoard logs (``OUT/tb``), checkpoints
 (``OUT/checkpoints``), the final policy (``OUT/policy.zip``) and ``OUT/train.json`` (the
 command's arguments, the training time, the machine). Needs the ``rl`` extra.
 """
@@ -214,14 +214,3 @@ def _summary(timesteps: int, n_envs: int, seed: int, speed_m_s: float,
                "command": (f"tfalda-sim train --timesteps {timesteps} --n-envs {n_envs} "
                            f"--seed {seed} --speed {speed_m_s:g} --out {out}"
                            + (f"  (Python: track={track!r})" if track is not None else ""))}
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m tfalda_sim.agents.train …`` is ``tfalda-sim train …``."""
-    from tfalda_sim.cli import main as cli_main
-
-    return cli_main(["train", *(sys.argv[1:] if argv is None else argv)])
-
-
-if __name__ == "__main__":
-    sys.exit(main())

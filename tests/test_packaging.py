@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -19,8 +20,14 @@ SCRIPT = str(Path(sys.executable).with_name("tfalda-sim"))
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("wheel")
+    # Built from a copy: setuptools leaves build/ in the source tree, and a stale
+    # build/lib could smuggle removed modules into a later wheel.
+    src = tmp_path_factory.mktemp("src") / "tfalda-sim"
+    shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(
+        ".venv", ".git", "build", "out", "runs", "__pycache__", "*.egg-info", ".hypothesis",
+        ".pytest_cache", ".ruff_cache"))
     subprocess.run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "-w",
-                    str(out), str(ROOT)], check=True, capture_output=True)
+                    str(out), str(src)], check=True, capture_output=True)
     (whl,) = out.glob("tfalda_sim-*.whl")
     return whl
 
@@ -85,3 +92,39 @@ def test_the_repository_folders_refuse_a_second_name() -> None:
                              capture_output=True, text=True, timeout=120)
         assert run.returncode != 0 and f"tfalda_sim.{name}; import it under that name" \
             in run.stderr, run.stderr
+
+
+LINT = ROOT / "tools" / "lint_imports.py"
+
+
+def _lint_with(tmp_path: Path, module: str, line: str) -> subprocess.CompletedProcess[str]:
+    sys.path.insert(0, str(LINT.parent))
+    try:
+        from lint_imports import layout_tree
+    finally:
+        sys.path.remove(str(LINT.parent))
+    pkg = layout_tree(tmp_path)
+    if module:
+        target = pkg / module
+        target.write_text(target.read_text() + f"\n{line}\n")
+    return subprocess.run([sys.executable, str(LINT), str(tmp_path)], capture_output=True,
+                          text=True, timeout=300)
+
+
+@pytest.mark.parametrize("module, line, broken", [
+    ("", "", None),
+    # an upward import: the camera (a low layer) reaching for the env
+    ("camera.py", "from tfalda_sim.envs import TfaldaTrackEnv", "Layers"),
+    # a cycle inside a package: the spatial index importing the track model back
+    ("tracks/index.py", "from .model import Track", "No import cycles"),
+    # the old top-level name of a moved package
+    ("world.py", "import tracks", "One namespace"),
+])
+def test_the_import_contracts_catch_what_they_forbid(tmp_path: Path, module: str, line: str,
+                                                     broken: str | None) -> None:
+    run = _lint_with(tmp_path, module, line)
+    if broken is None:
+        assert run.returncode == 0 and "0 broken" in run.stdout, run.stdout
+    else:
+        assert run.returncode == 1, run.stdout
+        assert f"{broken}" in run.stdout.split("Broken contracts")[-1], run.stdout

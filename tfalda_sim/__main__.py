@@ -1,3 +1,5 @@
+"""``python -m tfalda_sim …`` is ``tfalda-sim …``."""
+
 import sys
 
 from tfalda_sim.cli import main

@@ -17,7 +17,6 @@ from pathlib import Path
 from .outputs import DIRECTORY, Output, OutputError
 from .outputs import check_outputs as _check_outputs
 from .parallel import resolve_workers
-from .vehicle import CarParams
 
 EXIT_OK: int = 0
 EXIT_NEGATIVE: int = 1
@@ -26,10 +25,28 @@ EXIT_INTERRUPTED: int = 130
 """128 + SIGINT, the shell's code for a Ctrl-C."""
 
 __all__ = [
-    "DIRECTORY", "EXIT_BAD_INPUT", "EXIT_INTERRUPTED", "EXIT_NEGATIVE", "EXIT_OK", "MAX_SEED",
-    "CliError", "bounded_float_arg", "bounded_int_arg", "check_outputs", "finite_float_arg",
-    "interrupted", "positive_float_arg", "positive_int_arg", "seed_arg", "seed_range_arg",
-    "speed_arg", "workers_arg_value"]
+    "DIRECTORY",
+    "EXIT_BAD_INPUT",
+    "EXIT_INTERRUPTED",
+    "EXIT_NEGATIVE",
+    "EXIT_OK",
+    "MAX_SEED",
+    "CliError",
+    "add_force_option",
+    "add_json_option",
+    "add_workers_option",
+    "bounded_float_arg",
+    "bounded_int_arg",
+    "check_outputs",
+    "finite_float_arg",
+    "interrupted",
+    "positive_float_arg",
+    "positive_int_arg",
+    "seed_arg",
+    "seed_range_arg",
+    "speed_arg_for",
+    "workers_arg_value",
+]
 
 
 class CliError(Exception):
@@ -130,11 +147,11 @@ def positive_int_arg(text: str) -> int:
     return value
 
 
-speed_arg = bounded_float_arg(0.0, CarParams().max_speed_m_s, "m/s", low_open=True,
-                              why="the car's top speed")
-"""argparse type of every ``--speed``: a cruise speed the car can drive [m/s]."""
-
-SPEED_HELP = f"cruise speed [m/s], in (0, {CarParams().max_speed_m_s:g}]"
+def speed_arg_for(top_speed_m_s: float) -> Callable[[str], float]:
+    """argparse type of every ``--speed``: a cruise speed in (0, ``top_speed_m_s``] [m/s]
+    (the car's top speed, ``tfalda_sim.vehicle.CarParams.max_speed_m_s``)."""
+    return bounded_float_arg(0.0, top_speed_m_s, "m/s", low_open=True,
+                             why="the car's top speed")
 
 
 def check_outputs(paths: Mapping[str, Path | None], suffixes: Mapping[str, str], force: bool,
@@ -167,3 +184,22 @@ def interrupted(kept: str) -> int:
     """After a Ctrl-C: one line on stderr saying what was kept; the exit code 130."""
     print(f"interrupted (Ctrl-C): {kept}", file=sys.stderr)
     return EXIT_INTERRUPTED
+
+
+# Options every command spells the same way.
+def add_json_option(parser: argparse.ArgumentParser) -> None:
+    """``--json``: print one JSON object on stdout instead of the table."""
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def add_force_option(parser: argparse.ArgumentParser,
+                     what: str = "existing output files") -> None:
+    """``--force``: outputs that exist are replaced (refused without it)."""
+    parser.add_argument("--force", action="store_true", help=f"overwrite {what}")
+
+
+def add_workers_option(parser: argparse.ArgumentParser, what: str = "jobs") -> None:
+    """``--workers N``: processes of a sweep, capped by ``workers_arg_value``."""
+    parser.add_argument("--workers", type=positive_int_arg,
+                        help=f"processes (default: the CPUs available; capped at the {what}, "
+                             "the CPUs and the memory)")

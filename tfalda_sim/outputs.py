@@ -25,7 +25,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-from tfalda_sim.tracks.fileformat import publish
+from tfalda_sim.fileio import publish
 
 DIRECTORY = "/"
 """The ``suffix`` of an output that is a folder (``stress --out DIR``)."""

@@ -13,7 +13,7 @@ from types import TracebackType
 import cv2
 import numpy as np
 
-from tfalda_sim.tracks.fileformat import publish
+from tfalda_sim.fileio import publish
 
 MP4_FOURCC = "mp4v"
 """The codec every OpenCV build can write into an MP4 container."""

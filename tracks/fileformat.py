@@ -33,15 +33,13 @@ import json
 import math
 import os
 import re
-import tempfile
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any, NoReturn
+from typing import Any, NoReturn
 
 import numpy as np
 
+from ..fileio import atomic_write
 from .model import (
     MAX_LANE_WIDTH_M,
     MAX_TRACK_LENGTH_M,
@@ -63,8 +61,8 @@ VERSION = 1
 __all__ = [
     "FORMAT", "MAX_FILE_BYTES", "MAX_GAPS", "MAX_HEADING_RAD", "MAX_INTERSECTIONS",
     "MAX_JSON_DEPTH", "MAX_LANE_WIDTH_M", "MAX_MAT_EXTENT_M", "MAX_OBSTACLES", "MAX_SEGMENTS",
-    "MAX_TRACK_LENGTH_M", "MIN_RADIUS_M", "VERSION", "TrackFileError", "atomic_write",
-    "load_track", "publish", "save_track", "track_from_dict", "track_to_dict",
+    "MAX_TRACK_LENGTH_M", "MIN_RADIUS_M", "VERSION", "TrackFileError",
+    "load_track", "save_track", "track_from_dict", "track_to_dict",
 ]
 
 MAX_SEGMENTS: int = 100
@@ -481,31 +479,6 @@ def load_track(path: str | os.PathLike[str], *, check_rules: bool = True) -> Tra
             lines = "\n".join(f"  - {v.field}: {v.message} (rule {v.rule})" for v in violations)
             raise TrackFileError(f"{source}: breaks {len(violations)} Carolo-Cup rule(s):\n{lines}")
     return track
-
-
-def publish(tmp: str | os.PathLike[str], target: str | os.PathLike[str]) -> None:
-    """Move a finished temporary file onto ``target`` in one step. mkstemp creates 0600;
-    the file gets the permissions a plain open() would have given it."""
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
-    os.replace(tmp, target)
-
-
-@contextmanager
-def atomic_write(path: str | os.PathLike[str], mode: str = "w") -> Iterator[IO[Any]]:
-    """Write ``path`` through a temporary file in its folder (created if missing), put in
-    place in one step: a failed or interrupted write leaves an existing file untouched."""
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    try:
-        with os.fdopen(fd, mode, encoding=None if "b" in mode else "utf-8") as fh:
-            yield fh
-        publish(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def save_track(track: Track, path: str | os.PathLike[str], *, overwrite: bool = False) -> Path:

@@ -19,7 +19,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from . import rules
+from . import dimensions, rules
 from .model import Arc, Gap, Intersection, Lane, Line, Obstacle, Pose, Straight, Track
 
 MAX_TURN_RAD = math.radians(150.0)
@@ -36,7 +36,7 @@ class GeneratorParams:
     """
 
     difficulty: float = 0.5
-    lane_width_m: float = rules.LANE_WIDTH_M
+    lane_width_m: float = dimensions.LANE_WIDTH_M
     loop_corners: tuple[int, int] = (5, 9)
     """Number of control points of a simple loop."""
     lobe_corners: tuple[int, int] = (2, 4)
@@ -59,13 +59,13 @@ class GeneratorParams:
     """Chance of a figure-eight with an intersection instead of a simple loop."""
     gap_rate_max_per_m: float = 0.08
     """Expected marking gaps per metre of track [1/m] at difficulty 1."""
-    gap_length_m: tuple[float, float] = (0.2, rules.MAX_MARKING_GAP_M)
+    gap_length_m: tuple[float, float] = (0.2, dimensions.MAX_MARKING_GAP_M)
     """Length of one marking gap [m]."""
     obstacle_rate_max_per_m: float = 0.05
     """Expected obstacles per metre of track [1/m] at difficulty 1."""
-    obstacle_length_m: tuple[float, float] = (rules.OBSTACLE_MIN_LENGTH_M, 0.4)
-    obstacle_width_m: tuple[float, float] = (rules.OBSTACLE_WIDTH_RANGE_M[0], 0.3)
-    obstacle_height_m: tuple[float, float] = rules.OBSTACLE_HEIGHT_RANGE_M
+    obstacle_length_m: tuple[float, float] = (dimensions.OBSTACLE_MIN_LENGTH_M, 0.4)
+    obstacle_width_m: tuple[float, float] = (dimensions.OBSTACLE_WIDTH_RANGE_M[0], 0.3)
+    obstacle_height_m: tuple[float, float] = dimensions.OBSTACLE_HEIGHT_RANGE_M
     start_clear_m: float = 1.5
     """Road kept free of gaps and obstacles around the start line [m]."""
     max_attempts: int = 500
@@ -78,7 +78,7 @@ class GeneratorParams:
             v = getattr(self, f.name)
             if isinstance(v, tuple) and not v[0] <= v[1]:
                 raise ValueError(f"{f.name}: range ({v[0]}, {v[1]}) has low > high")
-        lo, hi = rules.LANE_WIDTH_RANGE_M
+        lo, hi = dimensions.LANE_WIDTH_RANGE_M
         if not lo <= self.lane_width_m <= hi:
             raise ValueError(f"lane_width_m must be in [{lo}, {hi}] m (the rules' ≈ 0.40 m), "
                              f"got {self.lane_width_m!r}")
@@ -90,8 +90,8 @@ class GeneratorParams:
                      "start_clear_m"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0.0):
                 raise ValueError(f"{name} must be finite and ≥ 0, got {getattr(self, name)!r}")
-        if self.gap_length_m[0] <= 0.0 or self.gap_length_m[1] > rules.MAX_MARKING_GAP_M:
-            raise ValueError(f"gap_length_m must lie in (0, {rules.MAX_MARKING_GAP_M}] m (the "
+        if self.gap_length_m[0] <= 0.0 or self.gap_length_m[1] > dimensions.MAX_MARKING_GAP_M:
+            raise ValueError(f"gap_length_m must lie in (0, {dimensions.MAX_MARKING_GAP_M}] m (the "
                              f"rules' longest gap), got {self.gap_length_m}")
         if self.max_attempts < 1:
             raise ValueError(f"max_attempts must be ≥ 1, got {self.max_attempts}")
@@ -157,7 +157,7 @@ def _figure_eight_polygon(rng: np.random.Generator, p: GeneratorParams) -> _Poly
     # Edges last_up→last_up+1 and k-1→0 pass through the crossing at the origin.
     tmax = np.full(k, np.inf)
     for i in (last_up, last_up + 1, k - 1, 0):
-        tmax[i] = float(np.hypot(*pts[i])) - rules.INTERSECTION_APPROACH_M
+        tmax[i] = float(np.hypot(*pts[i])) - dimensions.INTERSECTION_APPROACH_M
     return _Polygon(pts, tmax, np.zeros(2), (last_up, k - 1))
 
 
@@ -264,7 +264,7 @@ def _add_elements(track: Track, rng: np.random.Generator, p: GeneratorParams) ->
     base_blocked = [(-p.start_clear_m, p.start_clear_m)]
     for x in track.intersections:
         for a in (x.s1_m, x.s2_m):
-            reach = rules.INTERSECTION_APPROACH_M
+            reach = dimensions.INTERSECTION_APPROACH_M
             base_blocked.append((a - reach, a + reach))
     lines = (Line.LEFT, Line.CENTRE, Line.RIGHT)
     gaps: list[Gap] = []
@@ -294,11 +294,12 @@ def _add_elements(track: Track, rng: np.random.Generator, p: GeneratorParams) ->
         height = float(rng.uniform(*p.obstacle_height_m))
         lane = Lane.RIGHT if rng.random() < 0.5 else Lane.LEFT
         # Keep the box inside its lane with a margin for the bow of a curve.
-        room = max(0.0, 0.5 * (track.lane_width_m - rules.LINE_WIDTH_M - width) - 0.02)
+        room = max(0.0, 0.5 * (track.lane_width_m - dimensions.LINE_WIDTH_M - width) - 0.02)
         offset = float(rng.uniform(-room, room))
+        spacing = dimensions.OBSTACLE_MIN_SPACING_M
         blocked = list(base_blocked) + [
-            (o.s_m - 0.5 * o.length_m - rules.OBSTACLE_MIN_SPACING_M - 0.05,
-             o.s_m + 0.5 * o.length_m + rules.OBSTACLE_MIN_SPACING_M + 0.05) for o in obstacles]
+            (o.s_m - 0.5 * o.length_m - spacing - 0.05,
+             o.s_m + 0.5 * o.length_m + spacing + 0.05) for o in obstacles]
         s = _free_interval(rng, track, length, blocked)
         if s is not None:
             obstacles.append(Obstacle((s + 0.5 * length) % total, lane, length, width, height,

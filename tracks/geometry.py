@@ -14,10 +14,34 @@ millions of times per track.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
+import numpy as np
 from numba import njit
 
 TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A pose on the mat: position [m] and heading [rad]."""
+
+    x_m: float = 0.0
+    y_m: float = 0.0
+    heading_rad: float = 0.0
+
+
+@dataclass(frozen=True)
+class SegmentTable:
+    """The chain laid out in the world: one entry per segment (arrays of equal length)."""
+
+    x0: np.ndarray
+    y0: np.ndarray
+    h0: np.ndarray
+    kappa: np.ndarray
+    length: np.ndarray
+    s0: np.ndarray
+    end: Pose
 
 
 @njit(cache=True)

@@ -10,15 +10,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
 
-from .geometry import pose_at, project
-
-if TYPE_CHECKING:
-    from .model import SegmentTable
+from .geometry import SegmentTable, pose_at, project
 
 CELL_M: float = 0.5
 """Edge of a grid cell [m]."""

@@ -17,9 +17,9 @@ from functools import cached_property
 
 import numpy as np
 
-from .geometry import pose_at
+from .dimensions import LANE_WIDTH_M, LINE_WIDTH_M
+from .geometry import Pose, SegmentTable, pose_at
 from .index import GridIndex, build_index, locate_point, locate_points
-from .rules import LANE_WIDTH_M, LINE_WIDTH_M
 
 MAX_TRACK_LENGTH_M: float = 250.0
 """Longest centre line a track may have [m]. A Carolo-Cup mat is at most tens of metres
@@ -87,15 +87,6 @@ Segment = Straight | Arc
 
 
 @dataclass(frozen=True)
-class Pose:
-    """A pose on the mat: position [m] and heading [rad]."""
-
-    x_m: float = 0.0
-    y_m: float = 0.0
-    heading_rad: float = 0.0
-
-
-@dataclass(frozen=True)
 class Gap:
     """A stretch where ``line`` is not painted: from ``s_m`` for ``length_m`` [m]."""
 
@@ -142,19 +133,6 @@ class Location:
     lateral_m: float
     lane: Lane
     distance_m: float
-
-
-@dataclass(frozen=True)
-class SegmentTable:
-    """The chain laid out in the world: one entry per segment (arrays of equal length)."""
-
-    x0: np.ndarray
-    y0: np.ndarray
-    h0: np.ndarray
-    kappa: np.ndarray
-    length: np.ndarray
-    s0: np.ndarray
-    end: Pose
 
 
 def _finite_positive(value: float, what: str) -> None:

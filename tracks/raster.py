@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from . import rules
+from . import dimensions
 from .geometry import pose_at
 
 if TYPE_CHECKING:
@@ -304,7 +304,7 @@ _LINE_INDEX = {"right": 0, "centre": 1, "left": 2}
 
 
 def rasterize(track: Track, resolution_m: float = DEFAULT_RESOLUTION_M,
-              margin_m: float = rules.MAT_EDGE_MARGIN_M) -> MarkingMap:
+              margin_m: float = dimensions.MAT_EDGE_MARGIN_M) -> MarkingMap:
     """Paint the track's markings top-down at ``resolution_m`` [m/px].
 
     The map covers the road plus ``margin_m`` [m] of mat on every side (the rules' 300 mm
@@ -325,13 +325,13 @@ def rasterize(track: Track, resolution_m: float = DEFAULT_RESOLUTION_M,
     _raster_kernel(
         intensity, labels, xmin, ymax, resolution_m,
         t.x0, t.y0, t.h0, t.kappa, t.length, t.s0, track.length_m, track.closed,
-        track.lane_width_m, rules.LINE_WIDTH_M, rules.CENTRE_DASH_M,
-        rules.CENTRE_DASH_M + rules.CENTRE_DASH_GAP_M,
+        track.lane_width_m, dimensions.LINE_WIDTH_M, dimensions.CENTRE_DASH_M,
+        dimensions.CENTRE_DASH_M + dimensions.CENTRE_DASH_GAP_M,
         np.array([_LINE_INDEX[g.line.value] for g in gaps], dtype=np.int64),
         np.array([g.s_m for g in gaps], dtype=np.float64),
         np.array([g.s_m + g.length_m for g in gaps], dtype=np.float64),
         passes,
         math.nan if track.start_line_s_m is None else float(track.start_line_s_m),
-        rules.START_LINE_WIDTH_M, rules.STOP_LINE_WIDTH_M, CHUNK_M,
+        dimensions.START_LINE_WIDTH_M, dimensions.STOP_LINE_WIDTH_M, CHUNK_M,
     )
     return MarkingMap(intensity, labels, (xmin, ymax), float(resolution_m))

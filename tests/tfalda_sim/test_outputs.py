@@ -89,9 +89,9 @@ COMMANDS = {
     # command → (argv before the output option, the option, its suffix, the work it must
     # not reach)
     "track generate --out": (["track", "generate", "--seed", "1"], "--out", ".json",
-                             "tfalda_sim.cli.generate"),
+                             "tfalda_sim.tracks.command.generate"),
     "track generate --png": (["track", "generate", "--seed", "1"], "--png", ".png",
-                             "tfalda_sim.cli.generate"),
+                             "tfalda_sim.tracks.command.generate"),
     "render --out": (["render", "--track", "oval", "--s", "1"], "--out", ".png",
                      "tfalda_sim.rendering.Renderer"),
     "render --truth": (["render", "--track", "oval", "--s", "1", "--out", "{tmp}/ok.png"],

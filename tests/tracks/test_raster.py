@@ -18,7 +18,7 @@ from tfalda_sim.tracks import (
     load_named,
     rasterize,
 )
-from tfalda_sim.tracks.rules import LINE_WIDTH_M
+from tfalda_sim.tracks.dimensions import LINE_WIDTH_M
 
 
 def strip(heading: float = 0.0, **kw) -> Track:

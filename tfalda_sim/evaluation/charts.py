@@ -25,7 +25,7 @@ def _pyplot() -> Any:
 
 
 def _save(fig: Any, path: str | os.PathLike[str]) -> None:
-    from tfalda_sim.tracks.fileformat import atomic_write
+    from tfalda_sim.fileio import atomic_write
 
     with atomic_write(path, "wb") as f:
         fig.savefig(f, format="png", dpi=110)

@@ -1,4 +1,5 @@
-"""``tfalda-sim evaluate``: the thesis' test system from the command line."""
+"""The evaluation's commands: ``evaluate`` (the thesis' test system) and ``compare``
+(the Hough baseline against TFALDA with and without the LIS)."""
 
 from __future__ import annotations
 
@@ -16,17 +17,20 @@ import numpy as np
 from ..cli_common import (
     DIRECTORY,
     CliError,
+    add_force_option,
+    add_json_option,
+    add_workers_option,
     bounded_float_arg,
     bounded_int_arg,
     check_outputs,
     interrupted,
-    positive_int_arg,
     seed_range_arg,
-    speed_arg,
+    speed_arg_for,
     workers_arg_value,
 )
 from ..perception import DetectorConfig, LaneObservation
 from ..rendering import FrameTruth
+from ..vehicle import CarParams
 from .metrics import EPSILON_PX
 from .runner import WITH_LIS, WITHOUT_LIS, run_scenario
 from .scenarios import (
@@ -43,6 +47,12 @@ PRESETS = {"thesis": DetectorConfig.thesis, "improved": DetectorConfig.improved}
 _SUFFIXES = {"plot": ".png", "xml": ".xml", "jsonl": ".jsonl", "video": ".mp4"}
 
 
+def register(sub: Any) -> None:
+    """Add the evaluation's commands to the ``tfalda-sim`` subparsers."""
+    _evaluate_parser(sub)
+    _compare_parser(sub)
+
+
 MAX_STRIDE: int = 50
 """Largest ``--stride``: one frame per second of the drive (50 frames/s); beyond it a lap
 keeps a handful of frames and the LIS's frame-to-frame filters mean nothing."""
@@ -51,7 +61,7 @@ MAX_FRAMES: int = 10**7
 """Largest ``--max-frames`` (60 hours of driving at 50 frames/s)."""
 
 
-def add_evaluate_parser(sub: Any) -> None:
+def _evaluate_parser(sub: Any) -> None:
     ev = sub.add_parser(
         "evaluate", help="run the thesis' test system: hit rate with and without the LIS",
         description="Render a scenario, run TFALDA with and without the LIS on every frame "
@@ -72,22 +82,21 @@ def add_evaluate_parser(sub: Any) -> None:
     ev.add_argument("--epsilon-px", type=bounded_float_arg(0.0, 752.0, "px"),
                     default=EPSILON_PX,
                     help=f"hit distance of the black-box test [px] (default {EPSILON_PX:g})")
-    ev.add_argument("--speed", type=speed_arg, default=THESIS_SPEED_M_S,
+    ev.add_argument("--speed", type=speed_arg_for(CarParams().max_speed_m_s),
+                    default=THESIS_SPEED_M_S,
                     help=f"car speed [m/s] (default {THESIS_SPEED_M_S:.3f}: 15 km/h; at most "
                          "the car's top speed)")
     ev.add_argument("--stride", type=bounded_int_arg(1, MAX_STRIDE), default=1,
                     help=f"use every N-th camera frame ({FRAME_RATE_HZ:g}/s), 1–{MAX_STRIDE}")
     ev.add_argument("--max-frames", type=bounded_int_arg(1, MAX_FRAMES),
                     help="random: cut each lap after this many frames")
-    ev.add_argument("--workers", type=positive_int_arg,
-                    help="random: processes (default: the CPUs available; capped at the "
-                         "tracks, CPUs and memory)")
+    add_workers_option(ev)
     ev.add_argument("--plot", type=Path, help="PNG chart (per frame; random: per track)")
     ev.add_argument("--xml", type=Path, help="lanes per frame, thesis listing 4.1 (one track)")
     ev.add_argument("--jsonl", type=Path, help="every frame of every run as JSON Lines")
     ev.add_argument("--video", type=Path, help="MP4 with ROIs and lanes drawn (one track)")
-    ev.add_argument("--force", action="store_true", help="overwrite existing output files")
-    ev.add_argument("--json", action="store_true", help="print one JSON object")
+    add_force_option(ev)
+    add_json_option(ev)
     ev.set_defaults(func=cmd_evaluate, parser=ev)
 
 
@@ -331,7 +340,7 @@ def _thesis_list(text: str) -> tuple[str, ...]:
     return kinds
 
 
-def add_compare_parser(sub: Any) -> None:
+def _compare_parser(sub: Any) -> None:
     cp = sub.add_parser(
         "compare", help="score the Hough baseline against TFALDA with and without the LIS",
         description="Render the thesis' scenarios and generated tracks once, run the Hough "
@@ -352,14 +361,12 @@ def add_compare_parser(sub: Any) -> None:
                            help="thesis scenarios only")
     cp.add_argument("--max-frames", type=bounded_int_arg(1, MAX_FRAMES),
                     help="cut each generated lap after this many frames")
-    cp.add_argument("--workers", type=positive_int_arg,
-                    help="processes (default: the CPUs available; capped at the scenarios, "
-                         "CPUs and memory)")
+    add_workers_option(cp)
     cp.add_argument("--out", type=Path,
                     help="write compare.jsonl, compare.json, compare.md and compare.png into "
                          "this folder")
-    cp.add_argument("--force", action="store_true", help="overwrite existing output files")
-    cp.add_argument("--json", action="store_true", help="print one JSON object")
+    add_force_option(cp)
+    add_json_option(cp)
     cp.set_defaults(func=cmd_compare, parser=cp)
 
 

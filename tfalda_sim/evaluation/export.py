@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from tfalda_sim.tracks.fileformat import atomic_write
+from tfalda_sim.fileio import atomic_write
 
 from .runner import RunResult
 

@@ -18,7 +18,7 @@ import numpy as np
 from numba import njit
 
 from tfalda_sim.tracks import Track
-from tfalda_sim.tracks.rules import LINE_WIDTH_M
+from tfalda_sim.tracks.dimensions import LINE_WIDTH_M
 
 from ..rendering import PixelGeometry
 from .metrics import EPSILON_PX

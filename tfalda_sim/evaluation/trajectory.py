@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from tfalda_sim.fileio import atomic_write
 from tfalda_sim.tracks import Track
-from tfalda_sim.tracks.fileformat import atomic_write
 
 from ..camera import FRAME_RATE_HZ
 

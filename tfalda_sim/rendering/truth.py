@@ -16,12 +16,8 @@ import cv2
 import numpy as np
 
 from tfalda_sim.tracks import Marking, Track
-from tfalda_sim.tracks.rules import (
-    LINE_WIDTH_M,
-    START_LINE_WIDTH_M,
-    STOP_LINE_WIDTH_M,
-    obstacle_corners,
-)
+from tfalda_sim.tracks.dimensions import LINE_WIDTH_M, START_LINE_WIDTH_M, STOP_LINE_WIDTH_M
+from tfalda_sim.tracks.rules import obstacle_corners
 
 from ..camera import FisheyeCamera
 from .renderer import Bonnet, BoxFaces, obstacle_faces

@@ -1,0 +1,80 @@
+"""The replay's command: ``replay`` (a recording in an endless loop through a detector)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from ..cli_common import (
+    CliError,
+    add_force_option,
+    add_json_option,
+    check_outputs,
+    positive_int_arg,
+)
+from ..video import VideoError
+from .loop import Detector, HoughPreset, replay
+
+
+def register(sub: Any) -> None:
+    """Add ``replay`` to the ``tfalda-sim`` subparsers."""
+    rp = sub.add_parser(
+        "replay", help="replay a recorded video in a loop through a lane detector",
+        description="Read VIDEO in an endless loop (the second seed's set-up), run the Hough "
+                    "baseline or TFALDA + LIS on every frame, report frames/s and detections. "
+                    "Colour and other frame sizes are converted to the camera's grey "
+                    "752×480. Ctrl-C stops cleanly.")
+    rp.add_argument("video", type=Path, help="the recording (e.g. from tfalda-sim drive --video)")
+    rp.add_argument("--detector", choices=[d.value for d in Detector], required=True,
+                    help="the lane detector")
+    times = rp.add_mutually_exclusive_group()
+    times.add_argument("--loops", type=positive_int_arg, default=1,
+                       help="passes over the video (default 1)")
+    times.add_argument("--forever", action="store_true", help="loop until Ctrl-C")
+    rp.add_argument("--hough-preset", choices=[p.value for p in HoughPreset],
+                    default=HoughPreset.SIMULATOR.value,
+                    help="Hough settings: the seed's numbers or the simulator preset "
+                         "(default; the seed's 0.9 threshold finds no rendered marking)")
+    rp.add_argument("--out", type=Path, help="annotated MP4 (segments or ROIs and lanes)")
+    rp.add_argument("--stages", action="store_true",
+                    help="hough: write the seed's 2×2 stage view to --out instead")
+    add_force_option(rp, "an existing --out")
+    add_json_option(rp)
+    rp.set_defaults(func=cmd_replay)
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    check_outputs({"out": args.out}, {"out": ".mp4"}, args.force, inputs={"video": args.video})
+    if args.stages and (args.detector != Detector.HOUGH.value or args.out is None):
+        raise CliError("--stages writes the Hough stage view: use it with --detector hough "
+                       "and --out F.mp4")
+    try:
+        result = replay(args.video, Detector(args.detector),
+                        loops=None if args.forever else args.loops, out=args.out,
+                        hough=HoughPreset(args.hough_preset), stages=args.stages,
+                        progress=sys.stderr.isatty() or not args.json)
+    except (FileNotFoundError, VideoError) as exc:
+        raise CliError(str(exc)) from None
+    except OSError as exc:
+        raise CliError(f"cannot write {args.out}: {exc}") from None
+    # An interrupted --loops N did not finish what was asked; --forever ends that way.
+    code = 130 if result["stopped"] == "interrupted" and not args.forever else 0
+    if args.json:
+        print(json.dumps(result))
+        return code
+    print(f"{result['video']}: {result['frames']} frames, {result['loops_completed']} loops "
+          f"({result['stopped']}), {result['frames_per_s'] or 0:.0f} frames/s, detector "
+          f"{result['detector_ms_median'] or 0:.2f} ms/frame")
+    what = "segments" if args.detector == Detector.HOUGH.value else "lanes"
+    print(f"{args.detector}: {result['detections_per_frame'] or 0:.2f} {what}/frame, "
+          f"{result['frames_without_detection']} frames without any"
+          + (f", {result['lis_resets']} LIS resets" if result["lis_resets"] is not None
+             else ""))
+    if result["conversions"]:
+        print("converted: " + ", ".join(result["conversions"]))
+    if result["out"]:
+        print(f"wrote {result['out']}")
+    return code
