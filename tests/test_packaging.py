@@ -41,6 +41,19 @@ def test_the_wheel_installs_one_top_level_package(wheel: Path) -> None:
     dist_info = {t for t in tops if t.endswith(".dist-info")}
     assert tops - dist_info == {"tfalda_sim"}
     assert top_level in ([], ["tfalda_sim"])
+    # Every module of the source layout is in the wheel (a package missing from
+    # pyproject's list would be left out silently).
+    sys.path.insert(0, str(ROOT / "tools"))
+    try:
+        from lint_imports import MAPPED
+    finally:
+        sys.path.remove(str(ROOT / "tools"))
+    source = {f"tfalda_sim/{p.relative_to(ROOT / 'tfalda_sim').as_posix()}"
+              for p in (ROOT / "tfalda_sim").rglob("*.py")}
+    for name, folder in MAPPED.items():
+        source |= {f"tfalda_sim/{name}/{p.relative_to(ROOT / folder).as_posix()}"
+                   for p in (ROOT / folder).rglob("*.py")}
+    assert source <= set(names), sorted(source - set(names))
     # The moved packages, their data and the entry point are all under tfalda_sim/.
     for name in ("tfalda_sim/tracks/model.py", "tfalda_sim/tracks/data/oval.json",
                  "tfalda_sim/envs/tfalda_track.py", "tfalda_sim/agents/pid.py",
