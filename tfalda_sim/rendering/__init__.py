@@ -1,7 +1,8 @@
 """Rendering the camera image: scene preparation, the renderer, effects, ground truth."""
 
 from .effects import DomainRandomization, Effects
-from .renderer import Bonnet, PixelGeometry, Renderer, pixel_geometry
+from .pixels import Bonnet, PixelGeometry, pixel_geometry
+from .renderer import Renderer
 from .scene import Hall, Scene, build_scene
 from .truth import FrameTruth, frame_truth
 

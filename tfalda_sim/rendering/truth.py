@@ -20,7 +20,8 @@ from tfalda_sim.tracks.dimensions import LINE_WIDTH_M, START_LINE_WIDTH_M, STOP_
 from tfalda_sim.tracks.rules import obstacle_corners
 
 from ..camera import FisheyeCamera
-from .renderer import Bonnet, BoxFaces, obstacle_faces
+from .obstacles import BoxFaces, obstacle_faces
+from .pixels import Bonnet
 
 TRUTH_STEP_M: float = 0.02
 """Arc-length step [m] of the polylines the markings are drawn from."""

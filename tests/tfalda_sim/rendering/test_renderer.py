@@ -18,7 +18,7 @@ from tfalda_sim.rendering import (
     build_scene,
     frame_truth,
 )
-from tfalda_sim.rendering.renderer import BoxFaces, obstacle_faces
+from tfalda_sim.rendering.obstacles import BoxFaces, obstacle_faces
 
 ROIS = [(195, 260, 150, 75), (365, 260, 150, 75), (80, 340, 180, 85), (429, 340, 180, 85)]
 
