@@ -22,17 +22,7 @@ from tfalda_sim.tracks import NAMED_TRACKS, GeneratorParams, Track, generate, lo
 
 from tfalda_sim.camera import FRAME_RATE_HZ, FisheyeCamera
 from tfalda_sim.evaluation.geometric import geometric_hit_rates
-from tfalda_sim.faults import (
-    Blackout,
-    CameraShake,
-    Fault,
-    Glare,
-    LateralKick,
-    Overexposure,
-    active,
-    apply_image_faults,
-    with_gaps,
-)
+from tfalda_sim.faults import Fault, FaultInjector
 from tfalda_sim.perception import DetectorConfig, LaneObservation, TfaldaDetector
 from tfalda_sim.rendering import DomainRandomization, Effects, Renderer, Scene, build_scene
 from tfalda_sim.rendering.overlay import draw_observation
@@ -106,6 +96,18 @@ class RewardWeights:
             v = getattr(self, f.name)
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"RewardWeights.{f.name} must be finite and ≥ 0, got {v!r}")
+
+
+@dataclass
+class _Frame:
+    """What one step saw: the detector's lanes, the camera pose [m, m, rad] and step the
+    frame was rendered at, and its full image (None in "lanes" mode until ``render`` or
+    ``camera_frame`` renders it — the same pixels, from the same noise seed)."""
+
+    lanes: LaneObservation
+    camera_pose: tuple[float, float, float]
+    step: int
+    image: np.ndarray | None = None
 
 
 TrackSpec = str | int | Track | None
@@ -306,12 +308,15 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         self._map: TopDownMap | None = None
         self._world: World | None = None
         self._track: Track | None = None
+        self._last: _Frame | None = None
 
     # ------------------------------------------------------------------ pickling
     def __getstate__(self) -> dict[str, Any]:
         # The renderer and the scene are caches (tens of MB), rebuilt from the rest.
         state = self.__dict__.copy()
         state.update(_renderer=None, _scene=None, _map=None)
+        if self._last is not None:  # the full image is re-rendered bit for bit on demand
+            state["_last"] = replace(self._last, image=None)
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -345,14 +350,14 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         effects = self.randomization.sample(rng) if randomize else self.effects
         scene_seed = int(rng.integers(2**63)) if randomize else 0
         self._noise_seed = int(rng.integers(2**31))
-        self._fault_rng = np.random.default_rng(int(rng.integers(2**63)))
+        fault_rng = np.random.default_rng(int(rng.integers(2**63)))
 
         if self._world is None or self._track != track:
             self._world = World(track, self.car)
             self._map = None
         self._track = track
-        self._faults = faults
-        key = (with_gaps(track, faults), effects, scene_seed)
+        self._faults = FaultInjector(faults, fault_rng)
+        key = (self._faults.track(track), effects, scene_seed)
         if key != self._scene_key:
             self._scene = self._build_scene(*key)
             self._scene_key = key
@@ -366,12 +371,11 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         self._step_count = 0
         self._distance_m = 0.0
         self._lis_resets = 0
-        self._crashed = False
-        self._position = self._world.position()
-        self._s_prev = self._position.s_m
-        self._last_frame: np.ndarray | None = None
-        obs = self._observe()
-        return obs, self._info(self._position, lis_reset=False)
+        position = self._world.position()
+        self._s_prev = position.s_m
+        obs, frame = self._observe(self._faults.world(0, self._world))
+        self._last, self._position = frame, position
+        return obs, self._info(frame, position)
 
     def _check_reset_options(self, options: object) -> _ResetOptions:
         given = check_options(options)
@@ -453,39 +457,98 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
              ) -> tuple[np.ndarray | dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         if self._world is None:
             raise RuntimeError("call reset() before step()")
-        a = self._check_action(action)
+        camera_pose = self._simulate(self._check_action(action))
+        obs, frame = self._observe(camera_pose)
+        position = self._world.position()
+        progress_m = self._progress(position)
+        terminated = self._is_terminated(position)
+        truncated = self._is_truncated(position, terminated)
+        reward = self._reward(position, progress_m, terminated)
+        self._lis_resets += bool(frame.lanes.reset)
+        self._last, self._position = frame, position
+        return obs, reward, terminated, truncated, self._info(frame, position)
+
+    # The stages of a step, in data-flow order; each takes what it needs and returns what
+    # it made.
+    def _simulate(self, action: np.ndarray) -> tuple[float, float, float]:
+        """The car drives one frame (action → pymunk), then the world faults act; the
+        camera pose of this step's frame."""
         world = self._world
-        world.step(float(a[0]) * self.car.max_steer_rad,
-                   throttle=float(a[1]) if self.throttle else None)
+        assert world is not None
+        world.step(float(action[0]) * self.car.max_steer_rad,
+                   throttle=float(action[1]) if self.throttle else None)
         self._step_count += 1
-        for kick in active(self._faults, self._step_count, LateralKick):
-            x, y, yaw = world.pose
-            world.place((x - math.sin(yaw) * kick.offset_m, y + math.cos(yaw) * kick.offset_m,
-                         yaw))
-        obs = self._observe()
-        lis_reset = bool(self._obs.reset)
-        self._lis_resets += lis_reset
-        pos = world.position()
-        track = self._world.track
-        ds = pos.s_m - self._s_prev
-        if track.closed:  # unwrap over the start line
+        return self._faults.world(self._step_count, world)
+
+    def _observe(self, camera_pose: tuple[float, float, float]
+                 ) -> tuple[np.ndarray | dict[str, np.ndarray], _Frame]:
+        """Camera pose → renderer (the ROIs only in "lanes" mode) → image faults →
+        TFALDA + LIS → the observation, and the frame's record."""
+        world = self._world
+        assert world is not None and self._scene is not None
+        step = self._step_count
+        frame_seed = self._noise_seed + step
+        det = self._detector
+        image = None
+        if self.observation_mode is ObservationMode.LANES:
+            wins = det.rois
+            crops = self.renderer.render_windows(self._scene, camera_pose, wins,
+                                                 speed_m_s=world.speed_m_s,
+                                                 frame_seed=frame_seed)
+            self._faults.image(step, crops, wins)
+            lanes = det.process_crops(crops)
+        else:
+            image = self.renderer.render(self._scene, camera_pose, speed_m_s=world.speed_m_s,
+                                         frame_seed=frame_seed)
+            self._faults.image(step, [image], [(0, 0, image.shape[1], image.shape[0])])
+            lanes = det.process(image)
+        frame = _Frame(lanes=lanes, camera_pose=camera_pose, step=step, image=image)
+        vector = lane_vector(lanes, image_width=self.camera.width,
+                             image_height=self.camera.height,
+                             fault_limit=self.detector_config.lis.fault_limit,
+                             speed_ratio=world.speed_m_s / self.car.max_speed_m_s,
+                             steer_ratio=world.steer_rad / self.car.max_steer_rad)
+        if self.observation_mode is ObservationMode.LANES:
+            return vector, frame
+        pixels = image[..., None]  # type: ignore[index]
+        if self.observation_mode is ObservationMode.IMAGE:
+            return pixels, frame
+        return {"lanes": vector, "image": pixels}, frame
+
+    def _progress(self, position: TrackPosition) -> float:
+        """Arc length driven since the last step [m] (unwrapped over the start line)."""
+        track = self._world.track  # type: ignore[union-attr]
+        ds = position.s_m - self._s_prev
+        if track.closed:
             ds = (ds + 0.5 * track.length_m) % track.length_m - 0.5 * track.length_m
-        self._s_prev = pos.s_m
+        self._s_prev = position.s_m
         self._distance_m += ds
-        self._position = pos
+        return ds
+
+    def _reward(self, position: TrackPosition, progress_m: float, terminated: bool) -> float:
+        """The docstring's reward: progress, minus lateral and heading penalties, minus the
+        crash penalty on the terminating step."""
         w = self.reward_weights
-        dt = world.frame_dt_s
-        reward = (w.progress * ds / (self.speed_m_s * dt)
-                  - w.lateral * (2.0 * pos.cross_track_m / track.lane_width_m) ** 2
-                  - w.heading * (pos.heading_error_rad / (0.25 * math.pi)) ** 2)
-        terminated = pos.off_road or world.collided
+        track = self._world.track  # type: ignore[union-attr]
+        dt = self._world.frame_dt_s  # type: ignore[union-attr]
+        reward = (w.progress * progress_m / (self.speed_m_s * dt)
+                  - w.lateral * (2.0 * position.cross_track_m / track.lane_width_m) ** 2
+                  - w.heading * (position.heading_error_rad / (0.25 * math.pi)) ** 2)
         if terminated:
             reward -= w.crash
-        laps = self._laps()
-        truncated = not terminated and (
-            (self.max_laps > 0 and laps >= self.max_laps)
-            or (not track.closed and pos.s_m >= track.length_m - 0.3))
-        return obs, float(reward), bool(terminated), bool(truncated), self._info(pos, lis_reset)
+        return float(reward)
+
+    def _is_terminated(self, position: TrackPosition) -> bool:
+        """Off the road or into a carton."""
+        return bool(position.off_road or self._world.collided)  # type: ignore[union-attr]
+
+    def _is_truncated(self, position: TrackPosition, terminated: bool) -> bool:
+        """``max_laps`` laps done, or the end of an open track (the step limit is
+        Gymnasium's TimeLimit)."""
+        track = self._world.track  # type: ignore[union-attr]
+        return bool(not terminated and (
+            (self.max_laps > 0 and self._laps() >= self.max_laps)
+            or (not track.closed and position.s_m >= track.length_m - 0.3)))
 
     def _laps(self) -> int:
         track = self._world.track if self._world else None
@@ -493,55 +556,12 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             return 0
         return max(0, math.floor(self._distance_m / track.length_m))
 
-    def _camera_pose(self) -> tuple[float, float, float]:
-        x, y, yaw = self._world.pose  # type: ignore[union-attr]
-        for shake in active(self._faults, self._step_count, CameraShake):
-            yaw += float(self._fault_rng.uniform(-shake.amplitude_rad, shake.amplitude_rad))
-        return x, y, yaw
-
-    def _image_faults(self) -> list[Fault]:
-        """The image faults acting at this step, in schedule order."""
-        return active(self._faults, self._step_count, Blackout | Overexposure | Glare)
-
-    def _observe(self) -> np.ndarray | dict[str, np.ndarray]:
-        world = self._world
-        assert world is not None and self._scene is not None
-        pose = self._camera_pose()
-        frame_seed = self._noise_seed + self._step_count
-        image_faults = self._image_faults()
-        det = self._detector
-        frame = None
-        if self.observation_mode is ObservationMode.LANES:
-            wins = det.rois
-            crops = self.renderer.render_windows(self._scene, pose, wins,
-                                                 speed_m_s=world.speed_m_s, frame_seed=frame_seed)
-            apply_image_faults(crops, wins, image_faults)
-            self._obs = det.process_crops(crops)
-        else:
-            frame = self.renderer.render(self._scene, pose, speed_m_s=world.speed_m_s,
-                                         frame_seed=frame_seed)
-            apply_image_faults([frame], [(0, 0, frame.shape[1], frame.shape[0])], image_faults)
-            self._obs = det.process(frame)
-        self._last_frame = frame
-        self._camera_at = pose
-        lanes = lane_vector(self._obs, image_width=self.camera.width,
-                            image_height=self.camera.height,
-                            fault_limit=self.detector_config.lis.fault_limit,
-                            speed_ratio=world.speed_m_s / self.car.max_speed_m_s,
-                            steer_ratio=world.steer_rad / self.car.max_steer_rad)
-        if self.observation_mode is ObservationMode.LANES:
-            return lanes
-        image = frame[..., None]  # type: ignore[index]
-        if self.observation_mode is ObservationMode.IMAGE:
-            return image
-        return {"lanes": lanes, "image": image}
-
-    def _info(self, pos: TrackPosition, lis_reset: bool) -> dict[str, Any]:
+    def _info(self, frame: _Frame, pos: TrackPosition) -> dict[str, Any]:
         world = self._world
         assert world is not None
-        obs: LaneObservation = self._obs
-        hits = geometric_hit_rates(obs.lanes, self.renderer.geometry, world.track,
-                                   self._camera_at)
+        lanes = frame.lanes
+        hits = geometric_hit_rates(lanes.lanes, self.renderer.geometry, world.track,
+                                   frame.camera_pose)
         return {
             "cross_track_m": pos.cross_track_m,
             "heading_error_rad": pos.heading_error_rad,
@@ -552,8 +572,8 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             "steer_rad": world.steer_rad,
             "off_road": pos.off_road,
             "collision": world.collided,
-            "lis_fault_count": obs.fault_count,
-            "lis_reset": lis_reset,
+            "lis_fault_count": lanes.fault_count,
+            "lis_reset": bool(lanes.reset) and self._step_count > 0,
             "lis_resets": self._lis_resets,
             "detector_hit_rate": float(hits.mean()),
             "track": self._track_label,
@@ -570,16 +590,15 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
 
     def _full_frame(self) -> np.ndarray:
         """The last observation's full frame (rendered once in "lanes" mode), not copied."""
-        assert self._world is not None
-        frame = self._last_frame
-        if frame is None:
-            frame = self.renderer.render(self._scene, self._camera_at,  # type: ignore[arg-type]
+        assert self._world is not None and self._last is not None
+        frame = self._last
+        if frame.image is None:
+            image = self.renderer.render(self._scene, frame.camera_pose,  # type: ignore[arg-type]
                                          speed_m_s=self._world.speed_m_s,
-                                         frame_seed=self._noise_seed + self._step_count)
-            apply_image_faults([frame], [(0, 0, frame.shape[1], frame.shape[0])],
-                               self._image_faults())
-            self._last_frame = frame
-        return frame
+                                         frame_seed=self._noise_seed + frame.step)
+            self._faults.image(frame.step, [image], [(0, 0, image.shape[1], image.shape[0])])
+            frame.image = image
+        return frame.image
 
     def render(self) -> np.ndarray | None:
         if self.render_mode is None:
@@ -592,7 +611,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         pos = self._position
         text = (f"{self._track_label}  lap {self._laps()}  e_y {pos.cross_track_m:+.3f} m  "
                 f"v {self._world.speed_m_s:.2f} m/s")
-        out = draw_observation(frame, self._obs, text=text)
+        out = draw_observation(frame, self._last.lanes, text=text)
         if self._map is None:
             self._map = TopDownMap.of(self._world.track, 180, self.car)
         inset = self._map.draw(self._world.pose)

@@ -7,6 +7,8 @@ painted out of the scene (the ground truth and the reward still use the real tra
 lateral kick moves the car; camera shake turns the camera, not the car.
 
 Steps count env steps (camera frames) after ``reset``: step 1 is the first ``step()``.
+``FaultInjector`` is the schedule of one episode, asked where faults act (the scene's
+track, the world after the car moved, the rendered image).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, fields, replace
+from typing import Protocol
 
 import numpy as np
 
@@ -180,3 +183,51 @@ def apply_image_faults(crops: list[np.ndarray], windows: Sequence[tuple[int, int
                 blob = (np.float32(f.peak_dn) * np.exp(k * v[:, None] ** 2)
                         * np.exp(k * u[None, :] ** 2))
                 crop[:] = np.clip(crop + blob + np.float32(0.5), 0, 255).astype(np.uint8)
+
+
+class Movable(Protocol):
+    """What the injector moves: the car in the world (``tfalda_sim.world.World``)."""
+
+    @property
+    def pose(self) -> tuple[float, float, float]: ...
+
+    def place(self, pose: tuple[float, float, float]) -> None: ...
+
+
+class FaultInjector:
+    """An episode's fault schedule, asked at the points where faults act.
+
+    - ``track``: when the scene is built, the marking gaps are painted out;
+    - ``world``: after the car moved, lateral kicks move it sideways, and camera shake
+      turns the camera (the pose the frame is rendered from is returned);
+    - ``image``: blackout, overexposure and glare change the rendered pixels.
+
+    The shake's random angles come from ``rng`` (one draw per active shake per frame),
+    so an episode's faults are a function of its seed."""
+
+    def __init__(self, schedule: Sequence[object], rng: np.random.Generator) -> None:
+        self.schedule: tuple[Fault, ...] = check_schedule(schedule)
+        self.rng = rng
+
+    def track(self, track: Track) -> Track:
+        """The track to render: ``with_gaps``."""
+        return with_gaps(track, self.schedule)
+
+    def world(self, step: int, car: Movable) -> tuple[float, float, float]:
+        """Apply the world faults of ``step`` to ``car``; the camera pose ``(x [m], y [m],
+        yaw [rad])`` of this step's frame."""
+        for kick in active(self.schedule, step, LateralKick):
+            x, y, yaw = car.pose
+            car.place((x - math.sin(yaw) * kick.offset_m, y + math.cos(yaw) * kick.offset_m,
+                       yaw))
+        x, y, yaw = car.pose
+        for shake in active(self.schedule, step, CameraShake):
+            yaw += float(self.rng.uniform(-shake.amplitude_rad, shake.amplitude_rad))
+        return x, y, yaw
+
+    def image(self, step: int, crops: list[np.ndarray],
+              windows: Sequence[tuple[int, int, int, int]]) -> None:
+        """Apply the image faults of ``step`` to ``crops`` (in place; see
+        ``apply_image_faults``)."""
+        apply_image_faults(crops, windows, active(self.schedule, step,
+                                                  Blackout | Overexposure | Glare))

@@ -93,3 +93,32 @@ def test_unknown_faults_in_a_schedule_are_refused() -> None:
         check_schedule([Blackout(1), "glare"])
     with pytest.raises(TypeError, match="sequence"):
         check_schedule("blackout")
+
+
+class _Car:
+    def __init__(self) -> None:
+        self.pose = (1.0, 2.0, 0.0)
+
+    def place(self, pose: tuple[float, float, float]) -> None:
+        self.pose = pose
+
+
+def test_the_injector_acts_at_the_world_and_the_image() -> None:
+    from tfalda_sim.faults import FaultInjector
+
+    schedule = (LateralKick(3, 0.1), CameraShake(3, 2, amplitude_rad=0.05), Blackout(4, 1))
+    injector = FaultInjector(schedule, np.random.default_rng(0))
+    car = _Car()
+    assert injector.world(2, car) == (1.0, 2.0, 0.0) and car.pose == (1.0, 2.0, 0.0)
+    x, y, yaw = injector.world(3, car)
+    # the kick moved the car 0.1 m to its left; the shake turned only the camera
+    assert car.pose == pytest.approx((1.0, 2.1, 0.0)) and (x, y) == pytest.approx((1.0, 2.1))
+    assert 0 < abs(yaw) <= 0.05
+    crops = [np.full((4, 4), 200, np.uint8)]
+    injector.image(3, crops, [(0, 0, 4, 4)])
+    assert crops[0].min() == 200
+    injector.image(4, crops, [(0, 0, 4, 4)])
+    assert crops[0].max() == 0
+    # the same seed, the same shake
+    again = FaultInjector(schedule, np.random.default_rng(0))
+    assert again.world(3, _Car())[2] == yaw
