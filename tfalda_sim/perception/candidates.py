@@ -114,6 +114,17 @@ def preprocess(crop: np.ndarray, config: TfaldaConfig, horizontal_edges: bool) -
     return cv2.convertScaleAbs(cv2.Sobel(small, cv2.CV_16S, dx, dy, ksize=3))
 
 
+def distance_lambda(p_px: np.ndarray, d_px: np.ndarray, i: np.ndarray, previous_p_px: float,
+                    previous_d_px: float, previous_i: float, kp: float, kd: float,
+                    ki: float) -> np.ndarray:
+    """The thesis' distance function λ (listing 3.1) of every candidate against the lane
+    the ROI held last frame: ``kp·|P − P'| + kd·|D − D'| + ki·(I' − I)``, with ``P``, ``D``
+    in image pixels and ``I`` the summed gradient; the candidate of smallest λ is the lane
+    (a weaker gradient than last frame's costs, a stronger one pays)."""
+    return kp * np.abs(p_px - previous_p_px) + kd * np.abs(d_px - previous_d_px) \
+        + ki * (previous_i - i)
+
+
 def candidates(gradient: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(P, D, I)`` of every start x of a gradient image, in its own pixels (int64)."""
     h, w = gradient.shape

@@ -18,21 +18,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .candidates import candidates, preprocess, sobel_horizontal_edges
-from .lane import Lane
+from .candidates import candidates, distance_lambda, preprocess, sobel_horizontal_edges
 from .lis import LaneInferenceSystem, LisResult, Rows
 from .params import DetectorConfig
 from .rois import (
-    LaneChange,
+    LaneChangeState,
     Roi,
     StateKind,
-    Straight,
+    StraightState,
     classify,
     follow,
     initial_rois,
     state_of,
     windows,
 )
+from .segment import LaneSegment
 
 
 @dataclass(frozen=True)
@@ -112,7 +112,7 @@ class TfaldaDetector:
         self._rois: list[tuple[Roi, Roi]] = initial_rois(self.config.layout)
         self._previous: Rows | None = None  # last frame's final lanes
         self._fresh_side: list[list[bool]] | None = None  # lane change: sides to re-find
-        self._state = state_of(self._forced) if self._forced else Straight()
+        self._state = state_of(self._forced) if self._forced else StraightState()
         self.lis.reset()
 
     def force_state(self, kind: StateKind | None) -> None:
@@ -122,7 +122,7 @@ class TfaldaDetector:
                 self.config.lis.lane_change_state):
             raise ValueError("lane-change states need LisConfig(lane_change_state=True)")
         self._forced = kind
-        self._state = state_of(kind) if kind is not None else Straight()
+        self._state = state_of(kind) if kind is not None else StraightState()
 
     @property
     def rois(self) -> list[tuple[int, int, int, int]]:
@@ -210,7 +210,7 @@ class TfaldaDetector:
         object.__setattr__(obs, "next_rois", np.array(self.rois, dtype=np.int32))
         return obs
 
-    def _find(self, crop: np.ndarray, roi: Roi, prev: Lane | None) -> Lane:
+    def _find(self, crop: np.ndarray, roi: Roi, prev: LaneSegment | None) -> LaneSegment:
         """TFALDA on one ROI: the lane chosen among its candidates."""
         tcfg = self.config.tfalda
         height = roi.height - 1
@@ -228,11 +228,11 @@ class TfaldaDetector:
             k = int(np.argmax(i))  # first frame: the largest I (first of equals)
             lam = math.nan
         else:
-            lam_all = (tcfg.kp * np.abs(p_img - prev.p) + tcfg.kd * np.abs(d_img - prev.d)
-                       + tcfg.ki * (prev.i - i))
+            lam_all = distance_lambda(p_img, d_img, i, prev.p, prev.d, prev.i, tcfg.kp,
+                                      tcfg.kd, tcfg.ki)
             k = int(np.argmin(lam_all))  # smallest λ (first of equals)
             lam = float(lam_all[k])
-        return Lane(float(p_img[k]), float(d_img[k]), float(i[k]), float(roi.y),
+        return LaneSegment(float(p_img[k]), float(d_img[k]), float(i[k]), float(roi.y),
                     float(roi.y + height), lam)
 
     def _place(self, base: Rows, final: Rows, first: bool) -> StateKind:
@@ -242,19 +242,19 @@ class TfaldaDetector:
         if first or not lis.roi_placement:
             return self._state.kind
         state = self._state
-        if isinstance(state, LaneChange):
+        if isinstance(state, LaneChangeState):
             lowest_left, lowest_right = final[-1]
             if state.crossed(lowest_left.x_bottom, lowest_right.x_bottom, width):
                 self._hand_over(state.to_left)
                 self._forced = None
-                self._state = Straight()
+                self._state = StraightState()
                 return StateKind.STRAIGHT
         new, kinds = [], []
         for (left, right), (lroi, rroi) in zip(base, self._rois, strict=True):
             lnext, rnext = follow(left, lroi, width), follow(right, rroi, width)
             row_state = state
-            if self._forced is None and not isinstance(state, LaneChange):
-                row_state = classify(lnext, rnext) if lis.curve_states else Straight()
+            if self._forced is None and not isinstance(state, LaneChangeState):
+                row_state = classify(lnext, rnext) if lis.curve_states else StraightState()
             lnext, rnext = row_state.correct(lnext, rnext, width)
             new.append((lnext, rnext))
             kinds.append(row_state.kind)
@@ -271,12 +271,12 @@ class TfaldaDetector:
         for (left, right), (lroi, rroi) in zip(self._previous, self._rois, strict=True):
             lane_w = right.x_bottom - left.x_bottom
             if to_left:  # old left line → new right line; new left line further left
-                moved = Lane(left.p - lane_w, left.d, left.i, left.y_top, left.y_bottom)
+                moved = LaneSegment(left.p - lane_w, left.d, left.i, left.y_top, left.y_bottom)
                 new_prev.append((moved, left))
                 new_rois.append((follow(moved, lroi, width), follow(left, rroi, width)))
                 fresh.append([True, False])
             else:
-                moved = Lane(right.p + lane_w, right.d, right.i, right.y_top, right.y_bottom)
+                moved = LaneSegment(right.p + lane_w, right.d, right.i, right.y_top, right.y_bottom)
                 new_prev.append((right, moved))
                 new_rois.append((follow(right, lroi, width), follow(moved, rroi, width)))
                 fresh.append([False, True])

@@ -21,10 +21,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .lane import Lane
 from .params import LisConfig, WidthCheck
+from .segment import LaneSegment
 
-Rows = list[tuple[Lane, Lane]]
+Rows = list[tuple[LaneSegment, LaneSegment]]
 """Lanes per ROI row, top row first: (left, right)."""
 
 _LIMIT_ROWS_PX = np.array([260.0, 334.0, 340.0, 424.0])
@@ -40,12 +40,12 @@ def width_limits(config: LisConfig, y_px: float) -> tuple[float, float]:
     return float(np.interp(y_px, _LIMIT_ROWS_PX, lo)), float(np.interp(y_px, _LIMIT_ROWS_PX, hi))
 
 
-def measured_widths(left: Lane, right: Lane) -> tuple[float, float]:
+def measured_widths(left: LaneSegment, right: LaneSegment) -> tuple[float, float]:
     """Lane width at the row's top and bottom edge [px] (listing A.4 ``lowpass``)."""
     return right.x_top - left.x_top, right.x_bottom - left.x_bottom
 
 
-def vertical_target(upper: Lane, lower: Lane) -> float:
+def vertical_target(upper: LaneSegment, lower: LaneSegment) -> float:
     """x [px] of the upper lane's line at the height midway between its lower end and the
     lower lane's upper end: eq. 2.4, ``x = x1 − (x2 − x1)/(y2 − y1) · (y1 − y)`` with P1 the
     upper lane's lower end and P2 its upper end (listing A.4 has an operator-precedence slip
@@ -122,8 +122,9 @@ class LaneInferenceSystem:
         return LisResult(out, replaced, corrected, new_widths.copy(), self.fault_count,
                          reset_due)
 
-    def _vertical(self, upper: tuple[Lane, Lane], lower: tuple[Lane, Lane]
-                  ) -> tuple[tuple[Lane, Lane], tuple[bool, bool]]:
+    def _vertical(self, upper: tuple[LaneSegment, LaneSegment],
+                  lower: tuple[LaneSegment, LaneSegment]
+                  ) -> tuple[tuple[LaneSegment, LaneSegment], tuple[bool, bool]]:
         cfg = self.config
         new, moved = [], []
         for up, low in zip(upper, lower, strict=True):

@@ -2,9 +2,9 @@
 ``adjust_total``) and the driving states that look into a curve (section 2.3.2).
 
 The thesis asks for the driving states to become explicit state objects (section 3.4.2):
-``Straight``, ``LeftCurve``, ``RightCurve`` and ``LaneChange`` each correct one row's pair
-of ROIs; ``classify`` picks the state from the ROIs as listing 3.5 does, and a state forced
-from outside overrides it.
+``StraightState``, ``LeftCurveState``, ``RightCurveState`` and ``LaneChangeState`` each
+correct one row's pair of ROIs; ``classify`` picks the state from the ROIs as listing 3.5
+does, and a state forced from outside overrides it.
 """
 
 from __future__ import annotations
@@ -12,7 +12,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import Enum
 
-from .lane import Lane
 from .params import (
     INITIAL_ROIS,
     LEFT_CURVE_RIGHT_ROI_X_PX,
@@ -24,6 +23,7 @@ from .params import (
     ROI_MIN_WIDTH_PX,
     RoiLayout,
 )
+from .segment import LaneSegment
 
 ROI_BAND_TOP_PX: int = INITIAL_ROIS[0][1]
 """Top row of the ROI band [px] (table 2.4: 260)."""
@@ -96,7 +96,7 @@ def clamp(roi: Roi, image_width: int) -> Roi:
     return Roi(x, roi.y, width, roi.height)
 
 
-def follow(lane: Lane, roi: Roi, image_width: int) -> Roi:
+def follow(lane: LaneSegment, roi: Roi, image_width: int) -> Roi:
     """The next ROI over ``lane`` (listing A.6): from 50 px left of its leftmost end,
     75 px + |D| wide, the width clamped to [100, 275] and the ROI into the image."""
     x = round(min(lane.x_top, lane.x_bottom)) - ROI_MARGIN_LEFT_PX
@@ -104,7 +104,7 @@ def follow(lane: Lane, roi: Roi, image_width: int) -> Roi:
     return clamp(Roi(x, roi.y, width, roi.height), image_width)
 
 
-class Straight:
+class StraightState:
     """Straight driving (the thesis' default state): the ROIs stay where they follow the
     lanes."""
 
@@ -114,7 +114,7 @@ class Straight:
         return left, right
 
 
-class LeftCurve:
+class LeftCurveState:
     """Looking into a left curve (listing A.6): the left ROI moves left and narrows by
     half the overlap of the row's two ROIs."""
 
@@ -126,9 +126,9 @@ class LeftCurve:
         return Roi(x, left.y, max(ROI_MIN_WIDTH_PX, left.width - k), left.height), right
 
 
-class RightCurve:
+class RightCurveState:
     """Looking into a right curve: the right ROI moves right and narrows by half the
-    overlap, the mirror of ``LeftCurve`` as section 2.3.2 describes it. (Listing A.6
+    overlap, the mirror of ``LeftCurveState`` as section 2.3.2 describes it. (Listing A.6
     computes the shift from the right ROI's end instead of the overlap, a slip: that
     would move it by about half its width whatever the overlap.)"""
 
@@ -142,7 +142,7 @@ class RightCurve:
         return left, Roi(x, right.y, width, right.height)
 
 
-class LaneChange:
+class LaneChangeState:
     """Changing lanes (section 5.2, an improvement; off in the thesis preset). The ROIs
     follow the lanes as on a straight; the detector hands the lines over to the new lane
     once the car crosses the line it is changing over (``crossed``)."""
@@ -160,15 +160,15 @@ class LaneChange:
         return left_bottom_x > centre if self.to_left else right_bottom_x < centre
 
 
-DrivingState = Straight | LeftCurve | RightCurve | LaneChange
+DrivingState = StraightState | LeftCurveState | RightCurveState | LaneChangeState
 
 
 def state_of(kind: StateKind) -> DrivingState:
     """A fresh state object of ``kind``."""
-    return {StateKind.STRAIGHT: Straight, StateKind.LEFT_CURVE: LeftCurve,
-            StateKind.RIGHT_CURVE: RightCurve,
-            StateKind.LANE_CHANGE_LEFT: lambda: LaneChange(True),
-            StateKind.LANE_CHANGE_RIGHT: lambda: LaneChange(False)}[kind]()
+    return {StateKind.STRAIGHT: StraightState, StateKind.LEFT_CURVE: LeftCurveState,
+            StateKind.RIGHT_CURVE: RightCurveState,
+            StateKind.LANE_CHANGE_LEFT: lambda: LaneChangeState(True),
+            StateKind.LANE_CHANGE_RIGHT: lambda: LaneChangeState(False)}[kind]()
 
 
 def classify(left: Roi, right: Roi) -> DrivingState:
@@ -178,10 +178,10 @@ def classify(left: Roi, right: Roi) -> DrivingState:
     straight."""
     overlap = left.end > right.x
     if overlap and right.x < LEFT_CURVE_RIGHT_ROI_X_PX:
-        return LeftCurve()
+        return LeftCurveState()
     if overlap and left.end > RIGHT_CURVE_LEFT_ROI_END_PX:
-        return RightCurve()
-    return Straight()
+        return RightCurveState()
+    return StraightState()
 
 
 def windows(rois: list[tuple[Roi, Roi]]) -> list[tuple[int, int, int, int]]:

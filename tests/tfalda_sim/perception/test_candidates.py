@@ -93,3 +93,13 @@ def test_rising_edges_only_unless_both_are_asked_for() -> None:
     assert cols_rising.max() < 22  # only the dark→bright (left) edge
     assert cols_both.max() > 22  # both edges
     assert preprocess(crop, TfaldaConfig(), False).shape == (10, 20)  # resampled by 2
+
+
+def test_distance_lambda_is_listing_3_1() -> None:
+    from tfalda_sim.perception.candidates import distance_lambda
+
+    lam = distance_lambda(np.array([10.0, 14.0]), np.array([-3.0, 1.0]), np.array([900, 1200]),
+                          previous_p_px=12.0, previous_d_px=-2.0, previous_i=1000.0,
+                          kp=2.0, kd=3.0, ki=0.01)
+    # 2·|10−12| + 3·|−3+2| + 0.01·(1000−900); 2·|14−12| + 3·|1+2| + 0.01·(1000−1200)
+    assert lam.tolist() == [4.0 + 3.0 + 1.0, 4.0 + 9.0 - 2.0]

@@ -6,26 +6,27 @@ from dataclasses import replace
 
 import pytest
 
-from tfalda_sim.perception import Lane, LaneInferenceSystem, LisConfig, WidthCheck
+from tfalda_sim.perception import LaneInferenceSystem, LaneSegment, LisConfig, WidthCheck
 from tfalda_sim.perception.lis import measured_widths, vertical_target, width_limits
 
 UPPER = (260.0, 334.0)
 LOWER = (340.0, 424.0)
 
 
-def lane(x_top: float, x_bottom: float, rows: tuple[float, float], i: float = 5000.0) -> Lane:
-    return Lane(x_top, x_bottom - x_top, i, rows[0], rows[1])
+def lane(x_top: float, x_bottom: float, rows: tuple[float, float],
+         i: float = 5000.0) -> LaneSegment:
+    return LaneSegment(x_top, x_bottom - x_top, i, rows[0], rows[1])
 
 
-def straight() -> list[tuple[Lane, Lane]]:
+def straight() -> list[tuple[LaneSegment, LaneSegment]]:
     """A plausible straight: upper widths 92/234, lower 245/410 [px], lower lanes on the
     upper lanes' lines."""
     return [(lane(327, 251, UPPER), lane(419, 485, UPPER)),
             (lane(246, 163, LOWER), lane(491, 573, LOWER))]
 
 
-def shifted(rows: list[tuple[Lane, Lane]], r: int, side: int, dx_top: float,
-            dx_bottom: float) -> list[tuple[Lane, Lane]]:
+def shifted(rows: list[tuple[LaneSegment, LaneSegment]], r: int, side: int, dx_top: float,
+            dx_bottom: float) -> list[tuple[LaneSegment, LaneSegment]]:
     out = [list(pair) for pair in rows]
     ln = out[r][side]
     out[r][side] = lane(ln.x_top + dx_top, ln.x_bottom + dx_bottom, (ln.y_top, ln.y_bottom))

@@ -7,11 +7,11 @@ import itertools
 import numpy as np
 import pytest
 
-from tfalda_sim.perception import Lane, RoiLayout, StateKind
+from tfalda_sim.perception import LaneSegment, RoiLayout, StateKind
 from tfalda_sim.perception.params import INITIAL_ROIS, ROI_BORDER_PX
 from tfalda_sim.perception.rois import (
-    LeftCurve,
-    RightCurve,
+    LeftCurveState,
+    RightCurveState,
     Roi,
     clamp,
     classify,
@@ -40,19 +40,19 @@ def test_more_rows_split_the_same_band(rows: int) -> None:
 
 def test_follow_is_adjust_total() -> None:
     roi = Roi(80, 340, 180, 85)
-    lane = Lane(240.0, -80.0, 1.0, 340.0, 424.0)  # ends at x 240 (top) and 160 (bottom)
+    lane = LaneSegment(240.0, -80.0, 1.0, 340.0, 424.0)  # ends at x 240 (top) and 160 (bottom)
     nxt = follow(lane, roi, W)
     assert (nxt.x, nxt.width) == (160 - 50, 75 + 80)
-    steep = Lane(300.0, -400.0, 1.0, 340.0, 424.0)
+    steep = LaneSegment(300.0, -400.0, 1.0, 340.0, 424.0)
     assert follow(steep, roi, W).width == 275  # clamped to the widest
-    vertical = Lane(300.0, 0.0, 1.0, 340.0, 424.0)
+    vertical = LaneSegment(300.0, 0.0, 1.0, 340.0, 424.0)
     assert follow(vertical, roi, W).width == 100  # and to the narrowest
 
 
 @pytest.mark.parametrize("x", [-500.0, -10.0, 0.0, 700.0, 751.0, 5000.0])
 def test_follow_keeps_the_roi_inside_the_image(x: float) -> None:
     for d in (-300.0, 0.0, 300.0):
-        nxt = follow(Lane(x, d, 1.0, 340.0, 424.0), Roi(80, 340, 180, 85), W)
+        nxt = follow(LaneSegment(x, d, 1.0, 340.0, 424.0), Roi(80, 340, 180, 85), W)
         assert nxt.x >= ROI_BORDER_PX and nxt.end <= W - ROI_BORDER_PX
         assert 100 <= nxt.width <= 275
 
@@ -79,10 +79,10 @@ def test_no_overlap_is_straight() -> None:
 
 def test_curve_corrections_at_the_image_border() -> None:
     left, right = Roi(1, 260, 150, 75), Roi(100, 260, 150, 75)
-    new_left, _ = LeftCurve().correct(left, right, W)
+    new_left, _ = LeftCurveState().correct(left, right, W)
     assert new_left.x == ROI_BORDER_PX and new_left.width >= 100
     left, right = Roi(500, 260, 200, 75), Roi(600, 260, 151, 75)
-    _, new_right = RightCurve().correct(left, right, W)
+    _, new_right = RightCurveState().correct(left, right, W)
     assert new_right.end <= W - ROI_BORDER_PX
 
 

@@ -1,4 +1,5 @@
-"""A lane: TFALDA's straight segment through one ROI, in image coordinates [px]."""
+"""A lane segment: TFALDA's straight segment through one ROI, in image coordinates [px]
+(not to be confused with ``tracks.Lane``, the right or left lane of the road)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from dataclasses import dataclass
 
 
 @dataclass(frozen=True, slots=True)
-class Lane:
+class LaneSegment:
     """The segment from ``(p, y_top)`` to ``(p + d, y_bottom)`` [px] with its features:
     ``p`` start x on the ROI's top row, ``d`` end x − start x, ``i`` the summed gradient
     along it (in resampled gradient units) and ``lam`` the distance function's value λ
@@ -28,6 +29,7 @@ class Lane:
     def x_bottom(self) -> float:
         return self.p + self.d
 
-    def with_top(self, x_top: float) -> Lane:
+    def with_top(self, x_top: float) -> LaneSegment:
         """The same lane with its upper end moved to ``x_top`` and its lower end kept."""
-        return Lane(x_top, self.x_bottom - x_top, self.i, self.y_top, self.y_bottom, self.lam)
+        return LaneSegment(x_top, self.x_bottom - x_top, self.i, self.y_top, self.y_bottom,
+                           self.lam)
