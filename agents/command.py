@@ -106,7 +106,7 @@ def cmd_drive(args: argparse.Namespace) -> int:
             print(f"  lap {k}: {t:.2f} s")
         print(f"  mean |cross-track error| {result.mean_abs_cross_track_m * 100:.1f} cm, "
               f"max {result.max_abs_cross_track_m * 100:.1f} cm")
-        print(f"  departures {result.departures}, LIS resets {result.lis_resets}, mean hit "
+        print(f"  departures {result.departures}, LIS resets {result.roi_resets}, mean hit "
               f"rate {result.mean_hit_rate:.3f}")
         for path in (args.video, args.camera_video):
             if path:
@@ -316,7 +316,7 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
         for r in result["speeds"]:
             print(f"{r['speed_m_s']:>6.2f} m/s{r['successes']:>5}/{r['tracks']:<4}"
                   f"{r['mean_abs_cross_track_m'] * 100:>8.1f}cm"
-                  f"{r['lis_resets_per_track']:>12.2f}")
+                  f"{r['roi_resets_per_track']:>12.2f}")
         if args.out:
             print(f"wrote {args.out}")
     if result["interrupted"]:

@@ -85,7 +85,7 @@ class DriveResult:
     laps_completed: int
     lap_times_s: list[float]
     departures: int
-    lis_resets: int
+    roi_resets: int
     mean_abs_cross_track_m: float
     max_abs_cross_track_m: float
     mean_hit_rate: float
@@ -150,7 +150,7 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
                 abs_error_sum += abs(info["cross_track_m"])
                 max_abs_error = max(max_abs_error, abs(info["cross_track_m"]))
                 hit_sum += info["detector_hit_rate"]
-                resets += info["lis_reset"]
+                resets += info["roi_reset"]
                 # Distance over all episodes of the drive (a recovery starts a new episode).
                 lap_now = math.floor((distance + info["distance_m"]) / total)
                 while len(lap_times) < lap_now:
@@ -175,7 +175,7 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
             ended = "interrupted"
     return DriveResult(
         track=label or track.name or "", laps_completed=len(lap_times), lap_times_s=lap_times,
-        departures=departures, lis_resets=resets,
+        departures=departures, roi_resets=resets,
         mean_abs_cross_track_m=abs_error_sum / steps if steps else 0.0,
         max_abs_cross_track_m=max_abs_error,
         mean_hit_rate=hit_sum / steps if steps else math.nan,

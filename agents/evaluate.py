@@ -64,7 +64,7 @@ def summarise(runs: list[dict[str, Any]], speeds: tuple[float, ...]) -> list[dic
             "failed_seeds": [r["seed"] for r in group if not r["success"]],
             "mean_abs_cross_track_m": float(np.mean([r["mean_abs_cross_track_m"]
                                                      for r in group])),
-            "lis_resets_per_track": float(np.mean([r["lis_resets"] for r in group])),
+            "roi_resets_per_track": float(np.mean([r["roi_resets"] for r in group])),
         })
     return per_speed
 

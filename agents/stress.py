@@ -3,7 +3,7 @@
 Each run: the PID drives a generated track from its start line at 1.5 m/s; after
 ``ONSET_STEP`` frames one fault of the battery strikes (``FAULTS``), and the drive goes on
 for ``AFTER_STEPS`` frames after the fault has ended. Every fault is run with the thesis'
-LIS and with its reset stage switched off (``LisConfig(reset=False)``), and a run without
+LIS and with its reset stage switched off (``LisConfig(roi_reset=False)``), and a run without
 any fault counts the resets that happen anyway. Per run:
 
 - ``reset``: the LIS reset between the onset and ``AFTER_STEPS`` frames after the end;
@@ -107,12 +107,12 @@ class StressRun:
 
     seed: int
     fault: str
-    lis_reset_stage: bool
-    reset: bool
+    roi_reset_stage: bool
+    roi_reset: bool
     frames_to_recover: int | None
     false_resets: int
     on_road: bool
-    resets: int
+    roi_resets: int
 
 
 def _track_for(seed: int, fault: str, s_onset: float) -> Track:
@@ -127,7 +127,7 @@ def _track_for(seed: int, fault: str, s_onset: float) -> Track:
     return track
 
 
-def run_one(seed: int, fault: str, lis_reset_stage: bool) -> StressRun:
+def run_one(seed: int, fault: str, roi_reset_stage: bool) -> StressRun:
     """One closed-loop drive with ``fault`` on generated track ``seed``."""
     case = FAULTS[fault]
     base = replace(generate(seed), obstacles=())
@@ -140,8 +140,8 @@ def run_one(seed: int, fault: str, lis_reset_stage: bool) -> StressRun:
     s_onset = (start_s + speed * ONSET_STEP / 50.0) % base.length_m
     track = _track_for(seed, fault, s_onset)
     cfg = DetectorConfig.thesis()
-    if not lis_reset_stage:
-        cfg = replace(cfg, lis=replace(cfg.lis, reset=False))
+    if not roi_reset_stage:
+        cfg = replace(cfg, lis=replace(cfg.lis, roi_reset=False))
     env = TfaldaTrackEnv(track=track, speed_m_s=speed, detector=cfg,
                          obstacles=fault == "obstacle")
     obs, _ = env.reset(seed=seed, options={"start": (start_s, -0.5 * track.lane_width_m, 0.0),
@@ -154,7 +154,7 @@ def run_one(seed: int, fault: str, lis_reset_stage: bool) -> StressRun:
     for _ in range(steps):
         obs, _, terminated, _, info = env.step(pid.act(obs))
         hits.append(info["detector_hit_rate"])
-        resets.append(bool(info["lis_reset"]))
+        resets.append(bool(info["roi_reset"]))
         if terminated:
             on_road = False
             break
@@ -173,9 +173,9 @@ def run_one(seed: int, fault: str, lis_reset_stage: bool) -> StressRun:
         back = end + (recovered if recovered is not None else AFTER_STEPS)
         in_window = any(ONSET_STEP <= k <= end + AFTER_STEPS for k in reset_steps)
         false = sum(1 for k in reset_steps if k < ONSET_STEP or k > back + VALID_FRAMES)
-    return StressRun(seed=seed, fault=fault, lis_reset_stage=lis_reset_stage,
-                     reset=in_window, frames_to_recover=recovered, false_resets=false,
-                     on_road=on_road, resets=len(reset_steps))
+    return StressRun(seed=seed, fault=fault, roi_reset_stage=roi_reset_stage,
+                     roi_reset=in_window, frames_to_recover=recovered, false_resets=false,
+                     on_road=on_road, roi_resets=len(reset_steps))
 
 
 def _tightest_curve_start(track: Track) -> float:
@@ -227,7 +227,7 @@ def run_battery(seeds: Sequence[int], faults: Sequence[str] | None = None, *,
 @dataclass
 class _Group:
     runs: int = 0
-    resets: int = 0
+    roi_resets: int = 0
     false_resets: int = 0
     on_road: int = 0
     frames: Counter[int] = field(default_factory=Counter)
@@ -243,9 +243,9 @@ class StressTally:
         self.runs = 0
 
     def add(self, run: StressRun) -> None:
-        g = self._groups.setdefault((run.fault, run.lis_reset_stage), _Group())
+        g = self._groups.setdefault((run.fault, run.roi_reset_stage), _Group())
         g.runs += 1
-        g.resets += run.reset
+        g.roi_resets += run.roi_reset
         g.false_resets += run.false_resets
         g.on_road += run.on_road
         if run.frames_to_recover is not None:
@@ -261,8 +261,8 @@ class StressTally:
             g = self._groups[(fault, stage)]
             recovered = sum(g.frames.values())
             rows.append({
-                "fault": fault, "lis_reset_stage": stage, "runs": g.runs,
-                "reset_rate": g.resets / g.runs,
+                "fault": fault, "roi_reset_stage": stage, "runs": g.runs,
+                "roi_reset_rate": g.roi_resets / g.runs,
                 "recovered_rate": recovered / g.runs,
                 "median_frames_to_recover": _median(g.frames),
                 "false_resets_per_run": g.false_resets / g.runs,
@@ -299,8 +299,8 @@ def markdown_table(rows: Sequence[dict[str, Any]]) -> str:
     for r in rows:
         med = r["median_frames_to_recover"]
         lines.append(
-            f"| {r['fault']} | {'on' if r['lis_reset_stage'] else 'off'} | {r['runs']} | "
-            f"{r['reset_rate']:.0%} | {r['recovered_rate']:.0%} | "
+            f"| {r['fault']} | {'on' if r['roi_reset_stage'] else 'off'} | {r['runs']} | "
+            f"{r['roi_reset_rate']:.0%} | {r['recovered_rate']:.0%} | "
             f"{'–' if med is None else f'{med:.0f}'} | {r['false_resets_per_run']:.2f} | "
             f"{r['on_road_rate']:.0%} |")
     return "\n".join(lines)
@@ -322,7 +322,7 @@ def plot(rows: Sequence[dict[str, Any]], path: Path) -> None:
         ax = axes[k]
         for j, stage in enumerate((True, False)):
             vals = [next((r[key] for r in rows if r["fault"] == f
-                          and r["lis_reset_stage"] == stage), None) for f in faults]
+                          and r["roi_reset_stage"] == stage), None) for f in faults]
             vals = [math.nan if v is None else v for v in vals]
             ax.bar(x + (j - 0.5) * 0.38, vals, 0.38,
                    label=f"LIS reset stage {'on' if stage else 'off'}")

@@ -45,7 +45,7 @@ def lane_vector_names(rows: int) -> list[str]:
     names += [f"{roi}_replaced" for roi in rois]
     names += [f"{roi}_corrected" for roi in rois]
     names += [f"r{r}_width_{edge}" for r in range(rows) for edge in ("top", "bottom")]
-    names += ["fault_count", "reset", "first_frame"]
+    names += ["fault_count", "roi_reset", "first_frame"]
     names += [f"state_{s.name.lower()}" for s in STATES]
     names += ["speed", "steer"]
     return names
@@ -87,7 +87,7 @@ def lane_vector(obs: LaneObservation, *, image_width: int, image_height: int,
     v[7 * n:7 * n + 2 * rows] = obs.widths.ravel() / image_width
     k = 7 * n + 2 * rows
     v[k] = obs.fault_count / (fault_limit + 1)
-    v[k + 1] = obs.reset
+    v[k + 1] = obs.roi_reset
     v[k + 2] = obs.first_frame
     v[k + 3:k + 3 + len(STATES)] = 0.0
     v[k + 3 + STATES.index(obs.state)] = 1.0

@@ -215,7 +215,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
     ## Info
     ``cross_track_m``, ``heading_error_rad``, ``s_m``, ``lap`` (completed laps),
     ``distance_m`` (progress since reset), ``speed_m_s``, ``steer_rad``, ``off_road``,
-    ``collision``, ``lis_fault_count``, ``lis_reset`` (this step), ``lis_resets`` (since
+    ``collision``, ``lis_fault_count``, ``roi_reset`` (this step), ``roi_resets`` (since
     reset), ``detector_hit_rate`` (the thesis' hit rate of the four lanes, from the track
     geometry: ``tfalda_sim.evaluation.geometric``), ``track`` (name or seed).
 
@@ -370,7 +370,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             raise ValueError(f"the start pose {start} is inside a carton; choose another")
         self._step_count = 0
         self._distance_m = 0.0
-        self._lis_resets = 0
+        self._roi_resets = 0
         position = self._world.position()
         self._s_prev = position.s_m
         obs, frame = self._observe(self._faults.world(0, self._world))
@@ -464,7 +464,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         terminated = self._is_terminated(position)
         truncated = self._is_truncated(position, terminated)
         reward = self._reward(position, progress_m, terminated)
-        self._lis_resets += bool(frame.lanes.reset)
+        self._roi_resets += bool(frame.lanes.roi_reset)
         self._last, self._position = frame, position
         return obs, reward, terminated, truncated, self._info(frame, position)
 
@@ -573,8 +573,8 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             "off_road": pos.off_road,
             "collision": world.collided,
             "lis_fault_count": lanes.fault_count,
-            "lis_reset": bool(lanes.reset) and self._step_count > 0,
-            "lis_resets": self._lis_resets,
+            "roi_reset": bool(lanes.roi_reset) and self._step_count > 0,
+            "roi_resets": self._roi_resets,
             "detector_hit_rate": float(hits.mean()),
             "track": self._track_label,
         }

@@ -262,7 +262,7 @@ def test_stress(tmp_path: Path) -> None:
     doc = tfalda("stress", "--seeds", "10003:10004", "--faults", "none", "--workers", "1",
                  "--out", "DIR", "--json", cwd=tmp_path).json()
     assert doc["jobs"] == doc["runs"] == 2 and doc["interrupted"] is False
-    assert {(row["fault"], row["lis_reset_stage"]) for row in doc["summary"]} == {
+    assert {(row["fault"], row["roi_reset_stage"]) for row in doc["summary"]} == {
         ("none", True), ("none", False)}
     assert doc["out"] == "DIR"
     for name in REPORT_FILES.values():

@@ -26,6 +26,15 @@ except ImportError:  # … or the top-level packages before it
     from tfalda_sim.tracks import generate, load_named  # type: ignore[no-redef]
 
 
+_FIRST_NAMES = {"roi_reset": "lis_reset", "roi_resets": "lis_resets"}
+"""Names renamed since the first fingerprints (issue 16), hashed under the first name so
+digests stay comparable across the rename."""
+
+
+def _roi_reset(obs: Any) -> bool:
+    return obs.roi_reset if hasattr(obs, "roi_reset") else obs.reset
+
+
 def _h(*arrays: Any) -> str:
     d = hashlib.sha256()
     for a in arrays:
@@ -76,7 +85,7 @@ def renders() -> dict[str, str]:
                         obs = [det.process(frame) for _ in range(3)]
                         out[f"tfalda-{label}/{key}"] = _h(*[o.lanes for o in obs],
                                                           *[o.rois for o in obs],
-                                                          [bool(o.reset) for o in obs])
+                                                          [bool(_roi_reset(o)) for o in obs])
                     for label, hcfg in (("seed", HoughConfig()),
                                         ("sim", HoughConfig.simulator())):
                         out[f"hough-{label}/{key}"] = _h(HoughDetector(hcfg).detect(frame)
@@ -105,7 +114,8 @@ def rollouts() -> dict[str, str]:
                 obs, r, term, trunc, info = env.step(env.action_space.sample())
                 o = obs["lanes"] if mode == "dict" else obs
                 digests.append(_h(o, [r, term, trunc],
-                                  {k: v for k, v in info.items() if k != "track"}))
+                                  {_FIRST_NAMES.get(k, k): v for k, v in info.items()
+                                   if k != "track"}))
                 if term or trunc:
                     obs, info = env.reset()
             out[f"rollout/{mode}/dr{dr}"] = _h(digests)
@@ -126,6 +136,7 @@ def drive() -> dict[str, str]:
     res = run_drive(LanePid(), track, laps=1, max_steps=300)
     s = res.summary()
     # Means to 12 digits: the drive sums them per step (a running sum, not np.mean).
+    s = {_FIRST_NAMES.get(k, k): v for k, v in s.items()}
     return {"drive/pid/7": _h([float(f"{s[k]:.12g}") for k in (
         "laps_completed", "departures", "lis_resets", "mean_abs_cross_track_m",
         "max_abs_cross_track_m", "mean_hit_rate", "distance_m", "steps")])}

@@ -26,7 +26,7 @@ def test_drive_reports_laps_as_json_and_writes_a_video(tmp_path: Path,
     assert code == 0
     summary = json.loads(out)
     assert summary["laps_completed"] == 1 and len(summary["lap_times_s"]) == 1
-    for key in ("mean_abs_cross_track_m", "departures", "lis_resets", "agent", "speed_m_s"):
+    for key in ("mean_abs_cross_track_m", "departures", "roi_resets", "agent", "speed_m_s"):
         assert key in summary
     cap = cv2.VideoCapture(str(video))
     assert cap.isOpened() and cap.get(cv2.CAP_PROP_FRAME_COUNT) == summary["steps"]
@@ -60,7 +60,7 @@ def test_stress_writes_json_markdown_and_png(tmp_path: Path,
                        "--workers", "1", "--out", str(tmp_path), "--json")
     assert code == 0
     rows = json.loads(out)["summary"]
-    assert [(r["fault"], r["lis_reset_stage"]) for r in rows] == [("blackout", True),
+    assert [(r["fault"], r["roi_reset_stage"]) for r in rows] == [("blackout", True),
                                                                  ("blackout", False)]
     for name in ("stress.json", "stress.md", "stress.png"):
         assert (tmp_path / name).stat().st_size > 100
@@ -111,7 +111,7 @@ def test_stress_force_replaces_the_report(tmp_path: Path,
     assert code == 0 and json.loads(out)["runs"] == 2
     assert "lateral_kick" in (tmp_path / "stress.md").read_text()
     runs = (tmp_path / "stress.jsonl").read_text().splitlines()
-    assert [json.loads(r)["lis_reset_stage"] for r in runs] == [True, False]
+    assert [json.loads(r)["roi_reset_stage"] for r in runs] == [True, False]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["stress.json", "stress.jsonl",
                                                           "stress.md", "stress.png"]
 

@@ -17,7 +17,7 @@ def fake_observation() -> LaneObservation:
         d=np.zeros(4), intensity=np.zeros(4), lam=np.zeros(4),
         replaced=np.array([False, True, False, False]),
         corrected=np.array([False, False, True, False]),
-        widths=np.array([[110.0, 200.0], [240.0, 300.0]]), fault_count=4, reset=False,
+        widths=np.array([[110.0, 200.0], [240.0, 300.0]]), fault_count=4, roi_reset=False,
         state=StateKind.LEFT_CURVE, first_frame=False, next_rois=np.zeros((4, 4), np.int32))
 
 

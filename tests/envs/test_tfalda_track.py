@@ -148,7 +148,7 @@ def test_a_centred_drive_earns_about_one_per_step_and_counts_laps() -> None:
     assert truncated and info["lap"] == 1
     assert info["distance_m"] == pytest.approx(env._world.track.length_m, abs=0.05)
     assert 0.9 < np.mean(rewards) <= 1.0
-    assert info["detector_hit_rate"] > 0.8 and info["lis_resets"] == 0
+    assert info["detector_hit_rate"] > 0.8 and info["roi_resets"] == 0
 
 
 def test_leaving_the_road_terminates_with_the_crash_penalty() -> None:
@@ -191,7 +191,7 @@ def test_blackout_makes_the_lis_reset_and_recover() -> None:
     resets, hits = [], []
     for _ in range(150):
         _, _, terminated, _, info = env.step(centre_steering(env))
-        resets.append(info["lis_reset"])
+        resets.append(info["roi_reset"])
         hits.append(info["detector_hit_rate"])
         assert not terminated
     first = resets.index(True)

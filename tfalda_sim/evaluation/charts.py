@@ -41,8 +41,8 @@ def plot_confidence(runs: Mapping[str, RunResult], path: str | os.PathLike[str],
         colour = RUN_COLOURS.get(label)
         conf = 100 * run.confidence
         ax.plot(run.seq, conf, lw=1.3, color=colour, label=label)
-        if run.reset.any():
-            ax.plot(run.seq[run.reset], conf[run.reset], "x", color=colour, ms=7,
+        if run.roi_reset.any():
+            ax.plot(run.seq[run.roi_reset], conf[run.roi_reset], "x", color=colour, ms=7,
                     label=f"{label}: reset")
     ax.axhline(100 * LOW_CONFIDENCE, color="grey", lw=0.8, ls="--")
     ax.set_ylim(0, 102)
@@ -94,8 +94,8 @@ def plot_ablation(rows: Sequence[Mapping[str, Any]], path: str | os.PathLike[str
     names = [r["config"] for r in rows]
     y = np.arange(len(rows))
     fig, axes = plt.subplots(1, 3, figsize=(10.0, 0.4 * len(rows) + 1.4), sharey=True)
-    for ax, key, label in zip(axes, ("mean_confidence", "frames_below_0_75", "resets"),
-                              ("mean confidence [%]", "frames < 75 %", "resets"), strict=True):
+    for ax, key, label in zip(axes, ("mean_confidence", "frames_below_0_75", "roi_resets"),
+                              ("mean confidence [%]", "frames < 75 %", "roi_resets"), strict=True):
         values = [100 * r[key] if key == "mean_confidence" else r[key] for r in rows]
         ax.barh(y, values, color="tab:gray")
         ax.set_xlabel(label)

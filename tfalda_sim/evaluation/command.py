@@ -317,7 +317,7 @@ def _print_table(out: dict[str, Any]) -> None:
     for label, s in rows.items():
         acc = s["tusimple_accuracy"]
         print(f"{label:34} {s['frames']:7d} {s['mean_confidence']:6.3f} "
-              f"{s['min_confidence']:6.3f} {s['frames_below_0_75']:6d} {s['resets']:6d} "
+              f"{s['min_confidence']:6.3f} {s['frames_below_0_75']:6d} {s['roi_resets']:6d} "
               f"{acc if acc is not None else float('nan'):6.3f} "
               f"{s['false_positive_rate']:6.3f} {s['false_negative_rate']:6.3f}")
     for key in ("plot", "xml", "jsonl", "video"):

@@ -157,7 +157,7 @@ def frame_records(run: RunResult) -> Iterable[dict[str, Any]]:
             "false_positive": run.false_positive[k].tolist(),
             "false_negative": run.false_negative[k].tolist(),
             "replaced": run.replaced[k].tolist(), "corrected": run.corrected[k].tolist(),
-            "reset": bool(run.reset[k]), "fault_count": int(run.fault_count[k]),
+            "roi_reset": bool(run.roi_reset[k]), "fault_count": int(run.fault_count[k]),
             "state": run.state[k],
         }
 

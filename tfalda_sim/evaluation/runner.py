@@ -46,7 +46,7 @@ class RunResult:
     truth_present: np.ndarray  # (n, k) bool
     replaced: np.ndarray  # (n, k) bool
     corrected: np.ndarray  # (n, k) bool
-    reset: np.ndarray  # (n,) bool
+    roi_reset: np.ndarray  # (n,) bool
     fault_count: np.ndarray  # (n,) int
     state: list[str]  # (n,) driving state names
     detector_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -69,7 +69,7 @@ class RunResult:
             "frames": int(len(conf)), "epsilon_px": self.epsilon_px,
             "mean_confidence": float(conf.mean()), "min_confidence": float(conf.min()),
             "frames_below_0_75": int((conf < LOW_CONFIDENCE).sum()),
-            "resets": int(self.reset.sum()),
+            "roi_resets": int(self.roi_reset.sum()),
             "tusimple_accuracy": float(acc.mean()) if n_truth else None,
             "false_positive_rate": float(self.false_positive.sum() / max(1, given.sum())),
             "false_negative_rate": float(self.false_negative.sum() / max(1, n_truth)),
@@ -180,7 +180,7 @@ def _collect(label: str, scenario: Scenario, config: DetectorConfig, epsilon_px:
         truth_present=np.stack([s.truth_present for s in sc]),
         replaced=np.stack([o.replaced for o in obs]),
         corrected=np.stack([o.corrected for o in obs]),
-        reset=np.array([o.reset for o in obs]),
+        roi_reset=np.array([o.roi_reset for o in obs]),
         fault_count=np.array([o.fault_count for o in obs]),
         state=[o.state.name.lower() for o in obs],
         detector_s=np.array([r[2] for r in recs]))

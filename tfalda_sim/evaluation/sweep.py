@@ -19,7 +19,7 @@ from .metrics import EPSILON_PX
 from .runner import LOW_CONFIDENCE, RunResult, run_scenario
 from .scenarios import generated_scenario
 
-LIS_STAGES: tuple[str, ...] = ("lowpass", "min_max", "width_change", "vertical", "reset")
+LIS_STAGES: tuple[str, ...] = ("lowpass", "min_max", "width_change", "vertical", "roi_reset")
 """The LIS stages of the ablation (``LisConfig`` switches, thesis sections 2.1.2–2.4)."""
 
 _STAGE_NEEDS = {"width_change": ("lowpass",)}
@@ -90,7 +90,7 @@ class PooledTally:
     independent of the number of tracks): frames pooled, resets summed."""
 
     def __init__(self) -> None:
-        self.tracks = self.frames = self.below = self.resets = self.tracks_with_reset = 0
+        self.tracks = self.frames = self.below = self.roi_resets = self.tracks_with_reset = 0
         self.conf_sum = 0.0
         self.min_conf = self.worst_track_mean = math.inf
         self.acc_sum, self.acc_n = 0.0, 0
@@ -104,8 +104,8 @@ class PooledTally:
         self.min_conf = min(self.min_conf, float(conf.min()))
         self.worst_track_mean = min(self.worst_track_mean, float(conf.mean()))
         self.below += int((conf < LOW_CONFIDENCE).sum())
-        resets = int(run.reset.sum())
-        self.resets += resets
+        resets = int(run.roi_reset.sum())
+        self.roi_resets += resets
         self.tracks_with_reset += resets > 0
         acc = run.accuracy[run.truth_present]
         self.acc_sum += float(acc.sum())
@@ -125,8 +125,8 @@ class PooledTally:
             "min_confidence": self.min_conf,
             "frames_below_0_75": self.below,
             "share_below_0_75": self.below / self.frames,
-            "resets": self.resets,
-            "tracks_with_reset": self.tracks_with_reset,
+            "roi_resets": self.roi_resets,
+            "tracks_with_roi_reset": self.tracks_with_reset,
             "tusimple_accuracy": self.acc_sum / self.acc_n if self.acc_n else None,
             "false_positive_rate": self.fp / max(1, self.given),
             "false_negative_rate": self.fn / max(1, self.n_truth),

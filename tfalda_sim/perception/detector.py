@@ -62,7 +62,7 @@ class LaneObservation:
     """(rows, 2) float64: the low-pass filtered lane width at each row's top and bottom
     edge [px] (the measured ones in a first frame or with the filter off)."""
     fault_count: int
-    reset: bool
+    roi_reset: bool
     """The fault counter passed its limit in this frame: the next frame starts afresh."""
     state: StateKind
     """The driving state the next ROIs were placed in (the topmost row's that is not
@@ -176,7 +176,7 @@ class TfaldaDetector:
             result = self.lis.infer(rows, self._previous)
             final = result.rows
         widths = result.widths if result is not None else self.lis.widths.copy()
-        reset = result is not None and result.reset_due
+        reset = result is not None and result.roi_reset_due
         # ROIs of the next frame (listing A.2 places none after a first frame).
         base = final if (cfg.lis.roi_from_current_lanes or first) else self._previous
         if reset:
@@ -197,7 +197,7 @@ class TfaldaDetector:
                                                [(False, False)] * len(final)) for c in pair]),
             widths=np.asarray(widths, dtype=np.float64),
             fault_count=self.lis.fault_count,
-            reset=reset,
+            roi_reset=reset,
             state=state_kind,
             first_frame=first,
             next_rois=np.empty((0, 4), np.int32),  # filled below

@@ -67,7 +67,7 @@ class LisResult:
     corrected: list[tuple[bool, bool]]  # per row and side: upper end moved by the vertical check
     widths: np.ndarray  # (rows, 2) filtered widths at the top and bottom edge [px]
     fault_count: int
-    reset_due: bool
+    roi_reset_due: bool
 
 
 class LaneInferenceSystem:
@@ -118,9 +118,9 @@ class LaneInferenceSystem:
                 out[r], corrected[r] = self._vertical(out[r - 1], out[r])
             new_widths[r] = filtered
         self.widths = new_widths
-        reset_due = cfg.reset and self.fault_count > cfg.fault_limit
+        roi_reset_due = cfg.roi_reset and self.fault_count > cfg.fault_limit
         return LisResult(out, replaced, corrected, new_widths.copy(), self.fault_count,
-                         reset_due)
+                         roi_reset_due)
 
     def _vertical(self, upper: tuple[LaneSegment, LaneSegment],
                   lower: tuple[LaneSegment, LaneSegment]

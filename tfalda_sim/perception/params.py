@@ -133,7 +133,7 @@ class LisConfig:
     """Width-change check (section 2.1.3)."""
     vertical: bool = True
     """Vertical check (section 2.2, eq. 2.4)."""
-    reset: bool = True
+    roi_reset: bool = True
     """Fault counter and reset (section 2.4)."""
     roi_placement: bool = True
     """ROIs follow the last lanes (listing A.6 ``adjust_total``); off: ROIs stay put."""
@@ -189,7 +189,7 @@ class LisConfig:
         """Every LIS stage off; the ROIs still follow the lanes (the thesis' "ohne LIS" run
         is the software of the Studienarbeit, whose ROIs moved with the lanes)."""
         return cls(lowpass=False, min_max=False, width_change=False, vertical=False,
-                   reset=False, curve_states=False)
+                   roi_reset=False, curve_states=False)
 
 
 @dataclass(frozen=True)

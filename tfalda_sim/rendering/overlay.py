@@ -50,7 +50,7 @@ def draw_observation(frame: np.ndarray, obs: LaneObservation, *,
         p1 = np.rint(lane[2:] * 4).astype(int)
         cv2.line(out, tuple(p0), tuple(p1), colour, 2, cv2.LINE_AA, shift=2)
     status = f"frame {obs.frame}  {obs.state.name.lower()}  faults {obs.fault_count}"
-    if obs.reset:
+    if obs.roi_reset:
         status += "  RESET"
     if text:
         status = f"{text}  {status}"

@@ -71,7 +71,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     what = "segments" if args.detector == Detector.HOUGH.value else "lanes"
     print(f"{args.detector}: {result['detections_per_frame'] or 0:.2f} {what}/frame, "
           f"{result['frames_without_detection']} frames without any"
-          + (f", {result['lis_resets']} LIS resets" if result["lis_resets"] is not None
+          + (f", {result['roi_resets']} LIS resets" if result["roi_resets"] is not None
              else ""))
     if result["conversions"]:
         print("converted: " + ", ".join(result["conversions"]))

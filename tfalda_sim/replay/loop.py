@@ -83,7 +83,7 @@ def _frame_step(detector: Detector, hough: HoughDetector | None,
     # last frame's.
     lanes = int((np.all(np.isfinite(obs.lanes), axis=1) & ~obs.replaced).sum())
     picture = draw_observation(frame, obs, text=text) if annotate else None
-    return lanes, bool(obs.reset), picture, dt
+    return lanes, bool(obs.roi_reset), picture, dt
 
 
 def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
@@ -149,6 +149,6 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
         "detector_ms_median": float(np.median(t)) if len(t) else None,
         "detections_per_frame": float(d.mean()) if len(d) else None,
         "frames_without_detection": int((d == 0).sum()),
-        "lis_resets": resets if detector is Detector.TFALDA else None,
+        "roi_resets": resets if detector is Detector.TFALDA else None,
         "out": str(out) if writer is not None and writer.frames else None,
     }

@@ -130,7 +130,7 @@ def test_runs_are_deterministic_and_shaped(renderer: Renderer,
     again = run_scenario(thesis_scenario(ScenarioKind.STRAIGHT), CONFIGS, renderer=renderer)
     for label in CONFIGS:
         a, b = straight_runs[label], again[label]
-        for name in ("lanes", "hit_rates", "accuracy", "rois", "reset", "fault_count"):
+        for name in ("lanes", "hit_rates", "accuracy", "rois", "roi_reset", "fault_count"):
             assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), name
         assert a.lanes.shape == (80, 4, 4) and a.hit_rates.shape == (80, 4)
         assert list(a.seq) == list(range(80))
@@ -144,11 +144,11 @@ def test_summary_figures_follow_from_the_frames(straight_runs: dict[str, RunResu
         assert s["mean_confidence"] == pytest.approx(conf.mean())
         assert s["min_confidence"] == pytest.approx(conf.min())
         assert s["frames_below_0_75"] == int((conf < LOW_CONFIDENCE).sum())
-        assert s["resets"] == int(run.reset.sum())
+        assert s["roi_resets"] == int(run.roi_reset.sum())
         assert s["per_roi_false_negatives"] == run.false_negative.sum(axis=0).tolist()
     # the straight drive: both runs keep the lanes on the markings (thesis figure 4.2)
     assert straight_runs[WITH_LIS].summary()["mean_confidence"] > 0.95
-    assert straight_runs[WITHOUT_LIS].summary()["resets"] == 0
+    assert straight_runs[WITHOUT_LIS].summary()["roi_resets"] == 0
 
 
 def test_a_blacked_out_drive_fails_the_metric_and_resets_the_lis(renderer: Renderer) -> None:
@@ -156,7 +156,7 @@ def test_a_blacked_out_drive_fails_the_metric_and_resets_the_lis(renderer: Rende
     runs = run_scenario(dark, {WITH_LIS: DetectorConfig.thesis()}, renderer=renderer)
     s = runs[WITH_LIS].summary()
     assert s["mean_confidence"] < 0.5
-    assert s["resets"] >= 1  # lanes on nothing: the fault counter passes its limit
+    assert s["roi_resets"] >= 1  # lanes on nothing: the fault counter passes its limit
 
 
 def test_frame_hook_sees_every_frame(renderer: Renderer) -> None:

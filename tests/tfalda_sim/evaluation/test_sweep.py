@@ -46,7 +46,7 @@ def test_pooled_summary_pools_frames_and_sums_resets() -> None:
     assert pooled["tracks"] == 2 and pooled["frames"] == 20
     assert pooled["mean_confidence"] == pytest.approx(conf.mean())
     assert pooled["frames_below_0_75"] == int((conf < 0.75).sum())
-    assert pooled["resets"] == sum(int(r.reset.sum()) for r in runs)
+    assert pooled["roi_resets"] == sum(int(r.roi_reset.sum()) for r in runs)
 
 
 def test_bad_sweep_arguments_are_named() -> None:

@@ -44,17 +44,17 @@ def test_straight_track_lanes_lie_on_the_markings(renderer: Renderer) -> None:
     assert rates.mean() >= 0.95  # the frame confidence of section 4.1.7, averaged
     assert per_lane[[0, 1, 3]].min() >= 0.95
     assert 0.7 <= per_lane[2] < 0.95
-    assert not any(o.reset for o in obs)
+    assert not any(o.roi_reset for o in obs)
     # with the section-5 improvements (gap hold) all four lanes stay on the markings
     rates, obs = drive(renderer, load_named("straight"), DetectorConfig.improved())
     assert rates.mean(axis=0).min() >= 0.95
-    assert not any(o.reset for o in obs)
+    assert not any(o.roi_reset for o in obs)
 
 
 def test_lis_keeps_the_lanes_through_the_tight_left_curve(renderer: Renderer) -> None:
     track = load_named("left-curve")  # the view must not reach the open track's end
     rates, obs = drive(renderer, track, DetectorConfig.thesis(), end_margin_m=1.6)
-    assert not any(o.reset for o in obs)
+    assert not any(o.roi_reset for o in obs)
     assert rates.mean() >= 0.93
     assert (rates.mean(axis=1) < 0.75).sum() <= 2
     assert rates[-10:].mean() >= 0.95  # all lanes back on the markings after the curve
@@ -103,7 +103,7 @@ def test_blackout_frames_lead_to_a_reset_to_table_2_4(renderer: Renderer) -> Non
     seen_reset = None
     for k in range(40):  # a blown-out sensor: noise that no lane explains
         obs = det.process(rng.integers(0, 256, (480, 752), dtype=np.uint8))
-        if obs.reset:
+        if obs.roi_reset:
             seen_reset = k
             assert obs.fault_count > 10
             assert obs.next_rois.tolist() == [list(r) for r in INITIAL_ROIS]
@@ -118,7 +118,7 @@ def test_without_lis_nothing_is_replaced_or_reset() -> None:
     det = TfaldaDetector(DetectorConfig.without_lis())
     for _ in range(40):
         obs = det.process(rng.integers(0, 256, (480, 752), dtype=np.uint8))
-        assert not obs.replaced.any() and not obs.corrected.any() and not obs.reset
+        assert not obs.replaced.any() and not obs.corrected.any() and not obs.roi_reset
 
 
 @pytest.mark.parametrize(("frame", "match"), [

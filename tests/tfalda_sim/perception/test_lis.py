@@ -45,7 +45,7 @@ def test_a_plausible_frame_is_accepted_unchanged() -> None:
     result = system.infer(rows, straight())
     assert result.rows == rows
     assert result.replaced == [False, False]
-    assert result.fault_count == 0 and not result.reset_due
+    assert result.fault_count == 0 and not result.roi_reset_due
 
 
 def test_width_outside_table_2_3_takes_the_old_lanes_of_that_row() -> None:
@@ -106,7 +106,7 @@ def test_reset_is_due_after_the_11th_consecutive_fault() -> None:
     bad = shifted(shifted(straight(), 0, 1, 0.0, 200.0), 1, 1, 0.0, 300.0)
     results = [system.infer(bad, straight()) for _ in range(6)]
     assert [r.fault_count for r in results] == [2, 4, 6, 8, 10, 12]
-    assert [r.reset_due for r in results] == [False] * 5 + [True]
+    assert [r.roi_reset_due for r in results] == [False] * 5 + [True]
 
 
 def test_an_accepted_row_lowers_the_counter() -> None:
@@ -119,9 +119,9 @@ def test_an_accepted_row_lowers_the_counter() -> None:
 
 
 def test_reset_stage_off_never_asks_for_a_reset() -> None:
-    system = lis(reset=False)
+    system = lis(roi_reset=False)
     bad = shifted(shifted(straight(), 0, 1, 0.0, 200.0), 1, 1, 0.0, 300.0)
-    assert not any(system.infer(bad, straight()).reset_due for _ in range(20))
+    assert not any(system.infer(bad, straight()).roi_reset_due for _ in range(20))
 
 
 def test_vertical_target_is_eq_2_4() -> None:
