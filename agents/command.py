@@ -9,7 +9,6 @@ from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
-from tfalda_sim.tracks import NAMED_TRACKS, generate, load_named
 from tqdm import tqdm
 
 from tfalda_sim.cli_common import (
@@ -27,6 +26,7 @@ from tfalda_sim.cli_common import (
     speed_arg_for,
     workers_arg_value,
 )
+from tfalda_sim.tracks import NAMED_TRACKS, generate, load_named
 from tfalda_sim.vehicle import CarParams
 
 TOP_SPEED_M_S: float = CarParams().max_speed_m_s

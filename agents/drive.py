@@ -17,11 +17,11 @@ from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
-from tfalda_sim.envs import TfaldaTrackEnv
-from tfalda_sim.tracks import Track
 from tqdm import tqdm
 
 from tfalda_sim.camera import FRAME_RATE_HZ
+from tfalda_sim.envs import TfaldaTrackEnv
+from tfalda_sim.tracks import Track
 from tfalda_sim.video import VideoWriter
 
 from .pid import LanePid

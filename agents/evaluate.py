@@ -16,10 +16,10 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
-from tfalda_sim.tracks import generate
 from tqdm import tqdm
 
 from tfalda_sim.parallel import resolve_workers, stream
+from tfalda_sim.tracks import generate
 
 from .drive import drive, make_agent
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
 from tfalda_sim.envs import TfaldaTrackEnv
 
 K_LATERAL: float = 3.0

@@ -34,11 +34,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from tfalda_sim.tracks.dimensions import LANE_WIDTH_M
-from tfalda_sim.tracks.rules import min_centre_radius_m
 
 from tfalda_sim.camera import FRAME_RATE_HZ, FisheyeCamera
+from tfalda_sim.envs.observation import LaneVector, read_lane_vector
 from tfalda_sim.perception.params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX
+from tfalda_sim.tracks.dimensions import LANE_WIDTH_M
+from tfalda_sim.tracks.rules import min_centre_radius_m
 from tfalda_sim.vehicle import CarParams
 
 LANE_WIDTH_TOLERANCE_M: float = 0.12
@@ -115,19 +116,19 @@ class LanePid:
         self._model: np.ndarray | None = None
         self._coast = 0
 
-    def lane_geometry(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def read(self, obs: np.ndarray | dict[str, np.ndarray]) -> LaneVector:
+        """The observation decoded (``tfalda_sim.envs.observation.read_lane_vector``)."""
+        return read_lane_vector(obs, image_width=IMAGE_WIDTH_PX, image_height=IMAGE_HEIGHT_PX)
+
+    def lane_geometry(self, obs: np.ndarray | LaneVector) -> tuple[np.ndarray, np.ndarray]:
         """Per ROI row (top first): the lane centre ``(R, 2)`` and unit direction
         ``(R, 2)`` in the car frame [m], from the observation vector; NaN for a row whose
         two lanes are both missing."""
-        v = np.asarray(obs["lanes"] if isinstance(obs, dict) else obs, np.float64).ravel()
-        rows = (len(v) - 10) // 16
-        if rows < 1 or 16 * rows + 10 != len(v):
-            raise ValueError(f"not a lanes observation: {len(v)} entries (expected 16·rows + 10)")
+        decoded = obs if isinstance(obs, LaneVector) else self.read(obs)
+        rows = decoded.rows
         n = 2 * rows
-        lanes = v[:4 * n].reshape(n, 4) * [IMAGE_WIDTH_PX, IMAGE_HEIGHT_PX,
-                                           IMAGE_WIDTH_PX, IMAGE_HEIGHT_PX]
-        # A missing lane reads −1: it must not go through the camera model as a pixel.
-        lanes[np.any(v[:4 * n].reshape(n, 4) < 0.0, axis=1)] = np.nan
+        # A missing lane is NaN: it must not go through the camera model as a pixel.
+        lanes = decoded.lanes
         ends = self.camera.pixels_to_ground(lanes.reshape(2 * n, 2)).reshape(n, 2, 2)
         top, bottom = ends[:, 0], ends[:, 1]
         mid = 0.5 * (top + bottom)
@@ -217,13 +218,11 @@ class LanePid:
     def act(self, obs: np.ndarray) -> np.ndarray:
         """The steering action in [−1, 1] for one observation."""
         g = self.gains
-        v = np.asarray(obs["lanes"] if isinstance(obs, dict) else obs, np.float64).ravel()
-        odometry = (float(v[-2]) * self.car.max_speed_m_s,
-                    float(v[-1]) * self.car.max_steer_rad)
-        centres, dirs = self.lane_geometry(v)
-        rows = (len(v) - 10) // 16
-        flags = v[16 * rows:16 * rows + 3]  # fault count, reset, first frame
-        if self.gains.coast_on_reset and (flags[1] > 0.5 or flags[2] > 0.5) and (
+        decoded = self.read(obs)
+        odometry = (decoded.speed_ratio * self.car.max_speed_m_s,
+                    decoded.steer_ratio * self.car.max_steer_rad)
+        centres, dirs = self.lane_geometry(decoded)
+        if self.gains.coast_on_reset and (decoded.roi_reset or decoded.first_frame) and (
                 self._model is not None):
             # An LIS reset and the first frame after it pick the strongest edges, often
             # the wrong lines in a curve: coast on the model instead.

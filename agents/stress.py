@@ -30,11 +30,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tfalda_sim.envs import TfaldaTrackEnv
-from tfalda_sim.tracks import Lane, Obstacle, Track, generate
-from tfalda_sim.tracks.dimensions import MAX_MARKING_GAP_M
 from tqdm import tqdm
 
+from tfalda_sim.envs import TfaldaTrackEnv
 from tfalda_sim.faults import (
     Blackout,
     CameraShake,
@@ -46,6 +44,8 @@ from tfalda_sim.faults import (
 )
 from tfalda_sim.parallel import stream
 from tfalda_sim.perception import DetectorConfig
+from tfalda_sim.tracks import Lane, Obstacle, Track, generate
+from tfalda_sim.tracks.dimensions import MAX_MARKING_GAP_M
 
 from .pid import LanePid
 

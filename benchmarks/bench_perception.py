@@ -21,11 +21,11 @@ from collections.abc import Callable
 
 import numpy as np
 from _machine import machine, pin_to_one_core
-from tfalda_sim.tracks import generate, load_named
 from tqdm import tqdm
 
 from tfalda_sim.perception import DetectorConfig, HoughConfig, HoughDetector, TfaldaDetector
 from tfalda_sim.rendering import Effects, Renderer, build_scene
+from tfalda_sim.tracks import generate, load_named
 
 
 def _frames(n: int, quiet: bool) -> list[np.ndarray]:

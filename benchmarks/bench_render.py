@@ -18,10 +18,10 @@ import time
 
 import numpy as np
 from _machine import machine, pin_to_one_core
-from tfalda_sim.tracks import generate, load_named
 from tqdm import tqdm
 
 from tfalda_sim.rendering import DomainRandomization, Effects, Renderer, build_scene
+from tfalda_sim.tracks import generate, load_named
 
 THESIS_ROIS = [(195, 260, 150, 75), (365, 260, 150, 75), (80, 340, 180, 85), (429, 340, 180, 85)]
 """Initial ROIs of thesis table 2.4: (x, y, width, height) [px]."""

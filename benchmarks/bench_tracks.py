@@ -17,8 +17,9 @@ import sys
 import time
 
 import numpy as np
-from tfalda_sim.tracks import generate, load_named, rasterize, validate
 from tqdm import tqdm
+
+from tfalda_sim.tracks import generate, load_named, rasterize, validate
 
 
 def _ms(samples: list[float]) -> dict[str, float]:

@@ -19,12 +19,14 @@ detector's order (row by row from the top, left ROI before right):
 
 W = 752, H = 480 [px]. Values are clipped into the ranges (a lane end may lie a little
 outside its ROI); a missing lane reads −1, any other missing value 0.
-``lane_vector_names`` gives the name of every index.
+``lane_vector_names`` gives the name of every index; ``read_lane_vector`` is the inverse
+of ``lane_vector`` (every user of the layout decodes through it, never by offsets).
 """
 
 from __future__ import annotations
 
 import functools
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -96,3 +98,72 @@ def lane_vector(obs: LaneObservation, *, image_width: int, image_height: int,
     v[np.isnan(v)] = 0.0
     np.clip(v, low, high, out=v)
     return v
+
+
+def lane_vector_rows(size: int) -> int:
+    """The ROI rows ``R`` of a vector of ``size`` entries (``16 R + 10``)."""
+    rows = (size - 10) // 16
+    if rows < 1 or 16 * rows + 10 != size:
+        raise ValueError(f"not a lanes observation: {size} entries (expected 16·rows + 10, "
+                         "e.g. 42 for the thesis' two rows)")
+    return rows
+
+
+@dataclass(frozen=True)
+class LaneVector:
+    """A decoded ``"lanes"`` observation (``read_lane_vector``), in the detector's order
+    (row by row from the top, left ROI before right)."""
+
+    lanes: np.ndarray
+    """(n, 4) lane ends x_top, y_top, x_bottom, y_bottom [px]; NaN rows: missing lanes."""
+    roi_centre_x_px: np.ndarray
+    """(n,) centre column of the ROI read this frame [px]."""
+    replaced: np.ndarray
+    """(n,) bool: the LIS replaced the lane by last frame's."""
+    corrected: np.ndarray
+    """(n,) bool: the vertical check corrected the lane."""
+    widths_px: np.ndarray
+    """(R, 2) filtered lane width at each row's top and bottom edge [px]."""
+    fault_share: float
+    """LIS fault counter / (fault limit + 1) [0, 1]."""
+    roi_reset: bool
+    """The LIS reset the ROIs in this frame."""
+    first_frame: bool
+    """A first frame (start or after an ROI reset)."""
+    state: StateKind
+    """The driving state."""
+    speed_ratio: float
+    """Car speed / top speed [0, 1]."""
+    steer_ratio: float
+    """Front-wheel angle / steering limit [−1, 1]."""
+
+    @property
+    def rows(self) -> int:
+        return len(self.widths_px)
+
+
+def read_lane_vector(vector: np.ndarray | dict[str, np.ndarray], *, image_width: int,
+                     image_height: int) -> LaneVector:
+    """The inverse of ``lane_vector`` (of a dict observation, its ``"lanes"``); values
+    ``lane_vector`` clipped stay clipped, a lane that read −1 is NaN."""
+    v = np.asarray(vector["lanes"] if isinstance(vector, dict) else vector,
+                   np.float64).ravel()
+    rows = lane_vector_rows(len(v))
+    n = 2 * rows
+    ends = v[:4 * n].reshape(n, 4)
+    lanes = ends * [image_width, image_height, image_width, image_height]
+    lanes[np.any(ends < 0.0, axis=1)] = np.nan  # a missing lane reads −1
+    k = 7 * n + 2 * rows
+    return LaneVector(
+        lanes=lanes,
+        roi_centre_x_px=v[4 * n:5 * n] * image_width,
+        replaced=v[5 * n:6 * n] > 0.5,
+        corrected=v[6 * n:7 * n] > 0.5,
+        widths_px=v[7 * n:k].reshape(rows, 2) * image_width,
+        fault_share=float(v[k]),
+        roi_reset=bool(v[k + 1] > 0.5),
+        first_frame=bool(v[k + 2] > 0.5),
+        state=STATES[int(np.argmax(v[k + 3:k + 3 + len(STATES)]))],
+        speed_ratio=float(v[-2]),
+        steer_ratio=float(v[-1]),
+    )

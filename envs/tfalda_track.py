@@ -18,7 +18,6 @@ import cv2
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from tfalda_sim.tracks import NAMED_TRACKS, GeneratorParams, Track, generate, load_named
 
 from tfalda_sim.camera import FRAME_RATE_HZ, FisheyeCamera
 from tfalda_sim.evaluation.geometric import geometric_hit_rates
@@ -27,6 +26,7 @@ from tfalda_sim.perception import DetectorConfig, LaneObservation, TfaldaDetecto
 from tfalda_sim.rendering import DomainRandomization, Effects, Renderer, Scene, build_scene
 from tfalda_sim.rendering.overlay import draw_observation
 from tfalda_sim.rendering.topdown import TopDownMap
+from tfalda_sim.tracks import NAMED_TRACKS, GeneratorParams, Track, generate, load_named
 from tfalda_sim.vehicle import CarParams
 from tfalda_sim.world import TrackPosition, World
 

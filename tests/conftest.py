@@ -5,6 +5,7 @@ from __future__ import annotations
 import functools
 
 import pytest
+
 from tfalda_sim.tracks import Track, generate
 
 

@@ -54,11 +54,11 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
-from tfalda_sim.tracks.named import named_path
 
 from tests.cli_helpers import leaf_commands
 from tfalda_sim.cli import build_parser, main
 from tfalda_sim.parallel import available_cpus
+from tfalda_sim.tracks.named import named_path
 
 BUDGET_S = 1.5
 """Wall time an example may work before its simulated Ctrl-C [s]."""

@@ -26,9 +26,9 @@ from typing import Any, TypeVar
 
 import cv2
 import pytest
-from tfalda_sim.tracks import NAMED_TRACKS, load_track
 
 from tests.cli_helpers import command_tree, leaf_commands
+from tfalda_sim.tracks import NAMED_TRACKS, load_track
 
 SCRIPT: str | None = shutil.which("tfalda-sim", path=str(Path(sys.executable).parent))
 """The console script of the interpreter running the tests (None: not installed)."""

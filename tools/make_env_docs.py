@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import cv2
+
 from tfalda_sim.agents.oracle import OracleAgent
 from tfalda_sim.envs import TfaldaTrackEnv
 

@@ -6,9 +6,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import cv2
+
 from tfalda_sim.agents.oracle import OracleAgent
 from tfalda_sim.envs import TfaldaTrackEnv
-
 from tfalda_sim.perception import HoughConfig, HoughDetector
 from tfalda_sim.rendering.overlay import stage_view
 

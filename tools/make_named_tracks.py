@@ -10,14 +10,13 @@ import argparse
 import math
 import sys
 
+from tfalda_sim.evaluation.scenarios import THESIS_SPEED_M_S, THESIS_START_S_M
+from tfalda_sim.evaluation.trajectory import FRAME_RATE_HZ as THESIS_FPS
 from tfalda_sim.tracks.dimensions import LANE_WIDTH_M
 from tfalda_sim.tracks.fileformat import save_track
 from tfalda_sim.tracks.model import Arc, Intersection, Pose, Straight, Track
 from tfalda_sim.tracks.named import NAMED_TRACKS, named_path
 from tfalda_sim.tracks.rules import min_centre_radius_m
-
-from tfalda_sim.evaluation.scenarios import THESIS_SPEED_M_S, THESIS_START_S_M
-from tfalda_sim.evaluation.trajectory import FRAME_RATE_HZ as THESIS_FPS
 
 THESIS_LOOKAHEAD_M = 1.0
 """Distance [m] from the car to the middle of the ROIs: a frame "shows the curve" once the

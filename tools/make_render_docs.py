@@ -13,9 +13,9 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-from tfalda_sim.tracks import generate, load_named
 
 from tfalda_sim.rendering import DomainRandomization, Effects, Renderer, build_scene, frame_truth
+from tfalda_sim.tracks import generate, load_named
 
 ROOT = Path(__file__).resolve().parents[1]
 REFERENCE = ROOT.parent / "shared" / "reference" / "straight-road.png"

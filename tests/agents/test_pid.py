@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from tfalda_sim.agents.drive import drive, make_agent
 from tfalda_sim.agents.pid import LanePid
 from tfalda_sim.envs import TfaldaTrackEnv
+from tfalda_sim.envs.observation import lane_vector_rows
 from tfalda_sim.tracks import load_named
 
 
@@ -39,7 +41,7 @@ def test_missing_lanes_are_not_taken_for_pixels() -> None:
     for _ in range(3):
         obs, *_ = env.step(np.zeros(1, np.float32))
     full, _ = pid.lane_geometry(obs)
-    rows = (len(obs) - 10) // 16
+    rows = lane_vector_rows(len(obs))
     # The lower row's left lane missing (−1, as the observation encodes it): the centre
     # comes from the right line, half a lane width to its left.
     one = obs.copy()

@@ -26,6 +26,7 @@ def test_summary_table_has_one_row_per_fault_and_stage() -> None:
 
 def test_the_tally_gives_numpys_median_and_the_rates() -> None:
     import numpy as np
+
     from tfalda_sim.agents.stress import StressRun, StressTally
 
     rng = np.random.default_rng(1)

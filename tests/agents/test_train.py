@@ -7,6 +7,7 @@ import json
 import numpy as np
 import torch
 from stable_baselines3 import PPO
+
 from tfalda_sim.agents.drive import PpoAgent
 from tfalda_sim.agents.train import PpoConfig, train
 from tfalda_sim.envs import TfaldaTrackEnv

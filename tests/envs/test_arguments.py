@@ -10,10 +10,10 @@ import types
 import gymnasium as gym
 import numpy as np
 import pytest
-from tfalda_sim.envs import RewardWeights, TfaldaTrackEnv
-from tfalda_sim.envs._checks import show
 
 import tfalda_sim  # noqa: F401  (registers TfaldaTrack-v0)
+from tfalda_sim.envs import RewardWeights, TfaldaTrackEnv
+from tfalda_sim.envs._checks import show
 from tfalda_sim.faults import Blackout, LateralKick
 from tfalda_sim.perception import DetectorConfig
 from tfalda_sim.rendering import DomainRandomization, Effects

@@ -11,9 +11,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
+
 from tfalda_sim.envs import TfaldaTrackEnv
 from tfalda_sim.envs.tfalda_track import RESET_OPTIONS
-
 from tfalda_sim.faults import Blackout, CameraShake, Glare, LateralKick, MarkingGap
 
 # derandomize: the same examples every run; no database: nothing written to the repo.

@@ -3,8 +3,15 @@
 from __future__ import annotations
 
 import numpy as np
-from tfalda_sim.envs.observation import STATES, lane_vector, lane_vector_bounds, lane_vector_names
 
+from tfalda_sim.envs.observation import (
+    STATES,
+    lane_vector,
+    lane_vector_bounds,
+    lane_vector_names,
+    lane_vector_rows,
+    read_lane_vector,
+)
 from tfalda_sim.perception import LaneObservation, StateKind
 
 
@@ -48,3 +55,30 @@ def test_values_sit_at_their_documented_indices() -> None:
     assert (at["speed"], at["steer"]) == (0.25, -0.5)
     low, high = lane_vector_bounds(2)
     assert np.all((low <= v) & (v <= high))
+
+
+def test_read_lane_vector_inverts_lane_vector() -> None:
+    obs = fake_observation()
+    v = lane_vector(obs, image_width=752, image_height=480, fault_limit=10,
+                    speed_ratio=0.25, steer_ratio=-0.5)
+    back = read_lane_vector(v, image_width=752, image_height=480)
+    assert back.rows == lane_vector_rows(len(v)) == 2
+    np.testing.assert_allclose(back.lanes[:3], obs.lanes[:3], atol=1e-3)
+    assert np.all(np.isnan(back.lanes[3]))  # the missing lane
+    np.testing.assert_allclose(back.roi_centre_x_px, obs.rois[:, 0] + obs.rois[:, 2] / 2,
+                               atol=1e-3)
+    assert back.replaced.tolist() == obs.replaced.tolist()
+    assert back.corrected.tolist() == obs.corrected.tolist()
+    np.testing.assert_allclose(back.widths_px, obs.widths, atol=1e-3)
+    assert back.fault_share == np.float32(4 / 11)
+    assert (back.roi_reset, back.first_frame, back.state) == (False, False,
+                                                              StateKind.LEFT_CURVE)
+    assert (back.speed_ratio, back.steer_ratio) == (0.25, -0.5)
+    assert read_lane_vector({"lanes": v, "image": None}, image_width=752,
+                            image_height=480).state is StateKind.LEFT_CURVE
+    try:
+        read_lane_vector(v[:-1], image_width=752, image_height=480)
+    except ValueError as exc:
+        assert "41 entries" in str(exc)
+    else:
+        raise AssertionError("a vector of the wrong size was read")

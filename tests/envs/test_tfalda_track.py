@@ -9,12 +9,12 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
-from tfalda_sim.agents.oracle import OracleAgent
-from tfalda_sim.envs import TfaldaTrackEnv
-from tfalda_sim.tracks import load_named
 
 import tfalda_sim
+from tfalda_sim.agents.oracle import OracleAgent
+from tfalda_sim.envs import TfaldaTrackEnv
 from tfalda_sim.faults import Blackout, LateralKick, MarkingGap
+from tfalda_sim.tracks import load_named
 
 MODES = ("lanes", "image", "dict")
 

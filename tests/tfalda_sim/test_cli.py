@@ -8,9 +8,9 @@ import sys
 from pathlib import Path
 
 import pytest
-from tfalda_sim.tracks import generate, load_track
 
 from tfalda_sim.cli import main
+from tfalda_sim.tracks import generate, load_track
 
 
 def run(capsys: pytest.CaptureFixture[str], *argv: str) -> tuple[int, str, str]:

@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 import pytest
-from tfalda_sim.tracks import Line, load_named
 
 from tfalda_sim.faults import (
     Blackout,
@@ -21,6 +20,7 @@ from tfalda_sim.faults import (
     with_gaps,
 )
 from tfalda_sim.rendering import Effects, Renderer, build_scene
+from tfalda_sim.tracks import Line, load_named
 
 WINDOWS = [(195, 260, 150, 75), (365, 260, 150, 75), (80, 340, 180, 85), (429, 340, 180, 85)]
 

@@ -7,11 +7,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from tfalda_sim.tracks import load_named
 
 from tfalda_sim.perception import TfaldaDetector
 from tfalda_sim.rendering import Renderer, build_scene, frame_truth
 from tfalda_sim.rendering.overlay import LANE_BGR, draw_observation
+from tfalda_sim.tracks import load_named
 from tfalda_sim.video import VideoWriter
 
 

@@ -7,9 +7,9 @@ import pickle
 
 import numpy as np
 import pytest
-from tfalda_sim.tracks import load_named
 
 from tests.conftest import generated
+from tfalda_sim.tracks import load_named
 from tfalda_sim.world import PHYSICS_STEPS_PER_FRAME, World
 
 

@@ -8,10 +8,10 @@ import stat
 from pathlib import Path
 
 import pytest
-from tfalda_sim.tracks import NAMED_TRACKS, TrackFileError, load_named, load_track, save_track
-from tfalda_sim.tracks.fileformat import track_to_dict
 
 from tests.conftest import generated
+from tfalda_sim.tracks import NAMED_TRACKS, TrackFileError, load_named, load_track, save_track
+from tfalda_sim.tracks.fileformat import track_to_dict
 
 
 @pytest.mark.parametrize("track_id", [*NAMED_TRACKS, 3, 11, 25])

@@ -23,6 +23,9 @@ from typing import Any
 import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
+
+from tests.conftest import generated
+from tests.tracks.test_fileformat_limits import address_space_cap
 from tfalda_sim.tracks import (
     NAMED_TRACKS,
     Track,
@@ -33,9 +36,6 @@ from tfalda_sim.tracks import (
 )
 from tfalda_sim.tracks.fileformat import MAX_SEGMENTS, track_to_dict
 from tfalda_sim.tracks.model import MAX_TRACK_LENGTH_M
-
-from tests.conftest import generated
-from tests.tracks.test_fileformat_limits import address_space_cap
 
 FUZZ = settings(
     derandomize=True,

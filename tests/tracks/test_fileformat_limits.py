@@ -15,6 +15,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+
+from tests.conftest import generated
+from tfalda_sim.cli import main
 from tfalda_sim.tracks import (
     NAMED_TRACKS,
     TrackFileError,
@@ -33,9 +36,6 @@ from tfalda_sim.tracks.fileformat import (
     save_track,
 )
 from tfalda_sim.tracks.model import MAX_LANE_WIDTH_M, MAX_TRACK_LENGTH_M, Arc, Straight, Track
-
-from tests.conftest import generated
-from tfalda_sim.cli import main
 
 GiB = 1024**3
 

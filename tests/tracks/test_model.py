@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from tfalda_sim.tracks import Arc, Lane, Pose, Straight, Track, load_named
-from tfalda_sim.tracks.geometry import project
 
 from tests.conftest import generated
+from tfalda_sim.tracks import Arc, Lane, Pose, Straight, Track, load_named
+from tfalda_sim.tracks.geometry import project
 
 segment = st.one_of(
     st.builds(Straight, st.floats(0.05, 6.0)),

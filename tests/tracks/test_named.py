@@ -5,11 +5,11 @@ from __future__ import annotations
 import math
 
 import pytest
+
 from tfalda_sim.tracks import NAMED_TRACKS, Arc, load_named
 from tfalda_sim.tracks.fileformat import track_to_dict
 from tfalda_sim.tracks.named import named_path
 from tfalda_sim.tracks.rules import min_centre_radius_m
-
 from tools.make_named_tracks import THESIS_FPS, THESIS_SPEED_M_S, build
 
 

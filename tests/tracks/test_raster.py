@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+
 from tfalda_sim.tracks import (
     VIRTUAL,
     Gap,

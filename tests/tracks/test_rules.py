@@ -6,6 +6,8 @@ import math
 from dataclasses import replace
 
 import pytest
+
+from tests.conftest import generated
 from tfalda_sim.tracks import (
     Arc,
     Gap,
@@ -19,8 +21,6 @@ from tfalda_sim.tracks import (
     validate,
 )
 from tfalda_sim.tracks.rules import min_centre_radius_m, min_road_clearance_m
-
-from tests.conftest import generated
 
 
 def rules_of(track: Track) -> list[str]:

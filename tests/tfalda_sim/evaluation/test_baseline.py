@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tfalda_sim.tracks import load_named
 
 from tfalda_sim.cli import main
 from tfalda_sim.evaluation.baseline import (
@@ -20,6 +19,7 @@ from tfalda_sim.evaluation.baseline import (
 )
 from tfalda_sim.evaluation.scenarios import generated_scenario
 from tfalda_sim.rendering import Renderer, frame_truth
+from tfalda_sim.tracks import load_named
 
 
 @pytest.fixture(scope="module")

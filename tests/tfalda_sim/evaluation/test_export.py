@@ -9,7 +9,6 @@ import cv2
 import numpy as np
 import pytest
 import xmlschema
-from tfalda_sim.tracks import load_named
 
 from tfalda_sim.evaluation import WITH_LIS, WITHOUT_LIS, RunResult, run_scenario
 from tfalda_sim.evaluation.charts import plot_ablation, plot_confidence, plot_seeds
@@ -25,6 +24,7 @@ from tfalda_sim.evaluation.scenarios import Scenario
 from tfalda_sim.evaluation.trajectory import Trajectory
 from tfalda_sim.perception import DetectorConfig
 from tfalda_sim.rendering import Renderer
+from tfalda_sim.tracks import load_named
 
 LISTING_4_1 = """<root>
 <image seq ="11" time="1211011323" >

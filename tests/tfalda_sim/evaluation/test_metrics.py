@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from tfalda_sim.tracks import load_named
 
 from tfalda_sim.evaluation import score_frame, truth_distance
 from tfalda_sim.evaluation.metrics import (
@@ -18,6 +17,7 @@ from tfalda_sim.evaluation.metrics import (
 )
 from tfalda_sim.perception.params import INITIAL_ROIS
 from tfalda_sim.rendering import FrameTruth, Renderer, frame_truth
+from tfalda_sim.tracks import load_named
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tfalda_sim.tracks import load_named
 
 from tfalda_sim.evaluation import (
     LOW_CONFIDENCE,
@@ -26,6 +25,7 @@ from tfalda_sim.evaluation import (
 from tfalda_sim.evaluation.scenarios import THESIS_SPEED_M_S
 from tfalda_sim.perception import DetectorConfig
 from tfalda_sim.rendering import Effects, Renderer
+from tfalda_sim.tracks import load_named
 
 CONFIGS = {WITH_LIS: DetectorConfig.thesis(), WITHOUT_LIS: DetectorConfig.without_lis()}
 

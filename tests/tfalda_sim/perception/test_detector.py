@@ -6,12 +6,12 @@ import pickle
 
 import numpy as np
 import pytest
-from tfalda_sim.tracks import Marking, Track, load_named
 
 from tfalda_sim.evaluation import lane_hit_rates, truth_distance
 from tfalda_sim.perception import DetectorConfig, StateKind, TfaldaDetector
 from tfalda_sim.perception.params import INITIAL_ROIS
 from tfalda_sim.rendering import Effects, Renderer, build_scene, frame_truth
+from tfalda_sim.tracks import Marking, Track, load_named
 
 
 @pytest.fixture(scope="module")

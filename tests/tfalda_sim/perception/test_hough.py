@@ -507,10 +507,9 @@ def test_detect_is_deterministic_and_stateless() -> None:
 
 
 def test_on_a_rendered_straight_road_segments_lie_on_the_markings() -> None:
-    from tfalda_sim.tracks import load_named
-
     from tfalda_sim.evaluation import lane_hit_rates, truth_distance
     from tfalda_sim.rendering import Effects, Renderer, build_scene, frame_truth
+    from tfalda_sim.tracks import load_named
 
     track = load_named("straight")
     renderer = Renderer()

@@ -7,7 +7,6 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from tfalda_sim.tracks import Marking, Track, load_named
 
 from tests.conftest import generated
 from tfalda_sim.rendering import (
@@ -19,6 +18,7 @@ from tfalda_sim.rendering import (
     frame_truth,
 )
 from tfalda_sim.rendering.obstacles import BoxFaces, obstacle_faces
+from tfalda_sim.tracks import Marking, Track, load_named
 
 ROIS = [(195, 260, 150, 75), (365, 260, 150, 75), (80, 340, 180, 85), (429, 340, 180, 85)]
 

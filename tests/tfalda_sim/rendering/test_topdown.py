@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
-from tfalda_sim.tracks import load_named
 
 from tfalda_sim.rendering.topdown import TopDownMap
+from tfalda_sim.tracks import load_named
 
 
 def test_car_is_drawn_at_its_pose() -> None:

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from tfalda_sim.tracks import Marking, load_named
 
 from tests.conftest import generated
 from tfalda_sim.rendering import Effects, Renderer, build_scene, frame_truth
+from tfalda_sim.tracks import Marking, load_named
 
 ROIS = {"upper_left": (195, 260, 150, 75), "upper_right": (365, 260, 150, 75),
         "lower_left": (80, 340, 180, 85), "lower_right": (429, 340, 180, 85)}
