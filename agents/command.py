@@ -14,26 +14,30 @@ from tqdm import tqdm
 from tfalda_sim.cli_common import (
     DIRECTORY,
     CliError,
+    SweepEnd,
     add_force_option,
     add_json_option,
     add_workers_option,
     bounded_int_arg,
     check_outputs,
+    consume,
     interrupted,
     positive_int_arg,
     seed_arg,
     seed_range_arg,
     speed_arg_for,
+    sweep_exit,
     workers_arg_value,
 )
+from tfalda_sim.interrupts import ignoring_stops
 from tfalda_sim.tracks import NAMED_TRACKS, generate, load_named
-from tfalda_sim.vehicle import CarParams
+from tfalda_sim.vehicle import MIN_CRUISE_SPEED_M_S, CarParams
 
 TOP_SPEED_M_S: float = CarParams().max_speed_m_s
-"""The car's top speed: every ``--speed`` of these commands lies in (0, it] [m/s]."""
+"""The car's top speed: every ``--speed`` of these commands lies below it [m/s]."""
 
-speed_arg = speed_arg_for(TOP_SPEED_M_S)
-SPEED_HELP = f"cruise speed [m/s], in (0, {TOP_SPEED_M_S:g}]"
+speed_arg = speed_arg_for(MIN_CRUISE_SPEED_M_S, TOP_SPEED_M_S)
+SPEED_HELP = f"cruise speed [m/s], in [{MIN_CRUISE_SPEED_M_S:g}, {TOP_SPEED_M_S:g}]"
 
 
 def register(sub: Any) -> None:
@@ -75,7 +79,7 @@ def cmd_drive(args: argparse.Namespace) -> int:
                   inputs={"policy": args.policy})
     if args.track in NAMED_TRACKS:
         track, label = load_named(args.track), args.track
-    elif args.track.isdigit():
+    elif args.track.isascii() and args.track.isdigit():
         track, label = generate(int(args.track)), f"seed {args.track}"
         if not args.obstacles:
             track = replace(track, obstacles=())
@@ -218,43 +222,38 @@ def cmd_stress(args: argparse.Namespace) -> int:
     jobs = len(args.seeds) * len(faults) * 2
     workers = workers_arg_value(args.workers, jobs)
     tally = StressTally()
-    stopped = False
     with Outputs() as outs:
         files = {k: outs.path(args.out / name) for k, name in REPORT_FILES.items()}
         with open(files["jsonl"], "w", encoding="utf-8") as fh, \
                 tqdm(total=jobs, desc="stress", unit="run", disable=args.json) as bar:
-            runs = iter_battery(args.seeds, faults, workers=workers)
-            try:
-                for run in runs:
-                    fh.write(json.dumps(asdict(run)) + "\n")
-                    fh.flush()  # a finished run is on disk at once
-                    tally.add(run)
-                    bar.update()
-            except KeyboardInterrupt:
-                stopped = True
-            finally:
-                runs.close()
+
+            def keep(run: Any) -> None:
+                fh.write(json.dumps(asdict(run)) + "\n")
+                fh.flush()  # a finished run is on disk at once
+                tally.add(run)
+                bar.update()
+
+            end = consume(iter_battery(args.seeds, faults, workers=workers), keep)
         rows = tally.rows()
         if not rows:
             outs.abort()
-            return interrupted("no run had finished; nothing written")
-        with open(files["json"], "w", encoding="utf-8") as fh:
-            json.dump(report_document(rows, tally.runs) | {"interrupted": stopped}, fh,
-                      indent=1)
-        files["md"].write_text(markdown_table(rows) + "\n", encoding="utf-8")
-        plot(rows, files["png"])
-        outs.commit()
+            return sweep_exit(end, "no run had finished; nothing written")
+        with ignoring_stops():  # a second Ctrl-C must not lose the first one's results
+            with open(files["json"], "w", encoding="utf-8") as fh:
+                json.dump(report_document(rows, tally.runs) | {"interrupted": end.early}, fh,
+                          indent=1)
+            files["md"].write_text(markdown_table(rows) + "\n", encoding="utf-8")
+            plot(rows, files["png"])
+            outs.commit()
     written = ", ".join(REPORT_FILES.values())
     if args.json:
         print(json.dumps({"summary": rows, "runs": tally.runs, "jobs": jobs,
-                          "interrupted": stopped, "out": str(args.out)}))
+                          "interrupted": end.early, "out": str(args.out)}))
     else:
         print(markdown_table(rows))
         print(f"wrote {args.out}/: {written}")
-    if stopped:
-        return interrupted(f"kept the {tally.runs} of {jobs} runs that had finished and their "
-                           f"summary in {args.out}/ ({written})")
-    return 0
+    return sweep_exit(end, f"kept the {tally.runs} of {jobs} runs that had finished and "
+                           f"their summary in {args.out}/ ({written})")
 
 
 def _speeds_arg(text: str) -> tuple[float, ...]:
@@ -303,10 +302,11 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
     result = evaluate(args.agent, args.seeds, laps=args.laps, speeds=args.speeds,
                       policy=None if args.policy is None else str(args.policy),
                       workers=workers, progress=not args.json)
+    end = SweepEnd(interrupted=result["interrupted"], worker_died=result["worker_died"])
     if not result["runs"]:
-        return interrupted("no run had finished; nothing written")
+        return sweep_exit(end, "no run had finished; nothing written")
     if args.out:
-        with staged(args.out) as (tmp,):
+        with ignoring_stops(), staged(args.out) as (tmp,):
             tmp.write_text(json.dumps(result, indent=1), encoding="utf-8")
     if args.json:
         print(json.dumps(result))
@@ -319,7 +319,5 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
                   f"{r['roi_resets_per_track']:>12.2f}")
         if args.out:
             print(f"wrote {args.out}")
-    if result["interrupted"]:
-        return interrupted(f"kept the {len(result['runs'])} of {jobs} runs that had finished"
+    return sweep_exit(end, f"kept the {len(result['runs'])} of {jobs} runs that had finished"
                            + (f" ({args.out})" if args.out else ""))
-    return 0

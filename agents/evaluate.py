@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from tfalda_sim.cli_common import consume
 from tfalda_sim.parallel import resolve_workers, stream
 from tfalda_sim.tracks import generate
 
@@ -73,18 +74,18 @@ def evaluate(kind: str, seeds: range, *, laps: int = 3, speeds: tuple[float, ...
              policy: str | None = None, workers: int | None = None, progress: bool = True
              ) -> dict[str, Any]:
     """Drive every seed at every speed; per speed the success rate and figures. A Ctrl-C
-    ends it early with the runs finished so far (``"interrupted": true``)."""
+    ends it early with the runs finished so far (``"interrupted": true``), as does a
+    worker that died (``"worker_died"``: the message)."""
     jobs = len(seeds) * len(speeds)
     n, _ = resolve_workers(workers, jobs)
     runs: list[dict[str, Any]] = []
-    stopped = False
-    results = iter_evaluate(kind, seeds, laps=laps, speeds=speeds, policy=policy, workers=n)
-    try:
-        for run in tqdm(results, total=jobs, desc=kind, disable=not progress):
+    with tqdm(total=jobs, desc=kind, disable=not progress) as bar:
+        def keep(run: dict[str, Any]) -> None:
             runs.append(run)
-    except KeyboardInterrupt:
-        stopped = True
-    finally:
-        results.close()
+            bar.update()
+
+        end = consume(iter_evaluate(kind, seeds, laps=laps, speeds=speeds, policy=policy,
+                                    workers=n), keep)
     return {"agent": kind, "policy": policy, "laps": laps, "seeds": [seeds.start, seeds.stop],
-            "speeds": summarise(runs, speeds), "runs": runs, "interrupted": stopped}
+            "speeds": summarise(runs, speeds), "runs": runs, "interrupted": end.interrupted,
+            "worker_died": end.worker_died}

@@ -10,6 +10,7 @@ command's arguments, the training time, the machine). Needs the ``rl`` extra.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import multiprocessing
 import os
@@ -22,6 +23,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+from tfalda_sim.interrupts import ignoring_stops
 
 TRAIN_SEEDS: tuple[int, int] = (0, 1000)
 """Generated track seeds ``[low, high)`` the policy is trained on."""
@@ -55,8 +58,8 @@ def env_kwargs(speed_m_s: float = TRAIN_SPEED_M_S, seeds: tuple[int, int] = TRAI
     return {"track": track, "track_seeds": seeds, "speed_m_s": speed_m_s}
 
 
-OUT_FILES: tuple[str, ...] = ("policy.zip", "train.json", "tb", "checkpoints")
-"""What ``train`` writes into its ``out`` folder."""
+OUT_FILES: tuple[str, ...] = ("policy.zip", "train.json", "tb/", "checkpoints/")
+"""What ``train`` writes into its ``out`` folder (folders end in ``/``)."""
 
 
 def _make_env(**kwargs: Any) -> Any:
@@ -124,7 +127,7 @@ def _publish_run(staging: Path, out: Path) -> None:
             dest = target / child.name
             if child.is_dir():
                 stem, k = child.name.rsplit("_", 1) if "_" in child.name else (child.name, "1")
-                n = int(k) if k.isdigit() else 1
+                n = int(k) if k.isascii() and k.isdigit() else 1
                 while dest.exists():
                     n += 1
                     dest = target / f"{stem}_{n}"
@@ -157,8 +160,9 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
     out = Path(out)
     # Staged in the nearest existing folder (same file system, so the final moves are
     # renames): a failed or early-interrupted run creates no folder at all.
-    staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp",
+    staging = Path(tempfile.mkdtemp(prefix=".tfalda-sim-", suffix=".tmp",
                                     dir=_existing_ancestor(out)))
+    shield = contextlib.ExitStack()  # after a Ctrl-C: ignore the next while saving
     try:
         vec_cls = SubprocVecEnv if subprocess and n_envs > 1 else DummyVecEnv
         venv = make_vec_env(_make_env, n_envs=n_envs, seed=seed, vec_env_cls=vec_cls,
@@ -183,6 +187,7 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
                 model.learn(timesteps, callback=CallbackList(callbacks))
             except KeyboardInterrupt:
                 interrupted = True  # keep the policy so far
+                shield.enter_context(ignoring_stops())
             finally:
                 if bar is not None:
                     bar.close()
@@ -199,6 +204,7 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
         _publish_run(staging, out)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
+        shield.close()
     return summary
 
 

@@ -27,7 +27,7 @@ from tfalda_sim.rendering import DomainRandomization, Effects, Renderer, Scene, 
 from tfalda_sim.rendering.overlay import draw_observation
 from tfalda_sim.rendering.topdown import TopDownMap
 from tfalda_sim.tracks import NAMED_TRACKS, GeneratorParams, Track, generate, load_named
-from tfalda_sim.vehicle import CarParams
+from tfalda_sim.vehicle import MIN_CRUISE_SPEED_M_S, CarParams
 from tfalda_sim.world import TrackPosition, World
 
 from ._checks import (
@@ -227,10 +227,11 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
     or ``None`` for a new generated track each reset with a seed drawn from
     ``track_seeds``, a pair ``(low, high)`` of ints, ``0 ≤ low < high ≤ 2**63`` (the seed
     is the scenario id: train/test splits are seed ranges). ``obstacles``: keep the
-    cartons of generated tracks. ``speed_m_s``: cruise speed in ``(0, car.max_speed_m_s]``
-    (also the initial speed with throttle). ``domain_randomization``: draw the
-    photometric effects and the room from ``randomization`` (a ``DomainRandomization``)
-    each reset. ``effects``: the ``Effects`` without randomisation. ``detector``: the
+    cartons of generated tracks. ``speed_m_s``: cruise speed in
+    ``[vehicle.MIN_CRUISE_SPEED_M_S, car.max_speed_m_s]`` (0.05–8.3 m/s; also the
+    initial speed with throttle). ``domain_randomization``: draw the photometric
+    effects and the room from ``randomization`` (a ``DomainRandomization``) each reset.
+    ``effects``: the ``Effects`` without randomisation. ``detector``: the
     TFALDA + LIS configuration, a ``DetectorConfig`` or a preset name: ``"thesis"`` (the
     default), ``"improved"`` or ``"without_lis"`` (``DetectorConfig``'s classmethods).
     ``car``: ``CarParams``. ``reward``: ``RewardWeights``. ``max_laps``: an int ≥ 0, 0 =
@@ -274,8 +275,8 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         self.track_seeds = check_seed_range("track_seeds", track_seeds, MAX_TRACK_SEED_HIGH)
         self.car = check_optional("car", car, CarParams, "a tfalda_sim.vehicle.CarParams"
                                   ) or CarParams()
-        self.speed_m_s = check_real("speed_m_s", speed_m_s, 0.0, self.car.max_speed_m_s,
-                                    low_open=True, unit=" m/s")
+        self.speed_m_s = check_real("speed_m_s", speed_m_s, MIN_CRUISE_SPEED_M_S,
+                                    self.car.max_speed_m_s, unit=" m/s")
         self.max_laps = check_int("max_laps", max_laps)
         self.randomization = check_optional(
             "randomization", randomization, DomainRandomization,

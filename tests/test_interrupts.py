@@ -95,7 +95,7 @@ def test_stress_over_a_huge_range_streams_and_keeps_its_runs(tmp_path: Path) -> 
     out = tmp_path / "stress"
     code, _, err, peak = run_until(
         ["stress", "--seeds", "0:100000000", "--workers", "2", "--out", str(out)],
-        lambda: _lines(".stress.*.tmp.jsonl", out) >= 2, tmp_path)
+        lambda: _lines(".tfalda-sim-*.tmp.jsonl", out) >= 2, tmp_path)
     assert_clean_interrupt(code, err, peak)
     runs = [json.loads(line) for line in (out / "stress.jsonl").read_text().splitlines()]
     report = json.loads((out / "stress.json").read_text())
@@ -111,7 +111,7 @@ def test_evaluate_over_a_huge_range_streams_and_keeps_its_tracks(tmp_path: Path)
     code, _, err, peak = run_until(
         ["evaluate", "--scenario", "random", "--seeds", "0:100000000", "--max-frames", "20",
          "--jsonl", str(jsonl), "--plot", str(tmp_path / "seeds.png")],
-        lambda: _lines(".frames.*.tmp.jsonl", tmp_path) >= 40, tmp_path)
+        lambda: _lines(".tfalda-sim-*.tmp.jsonl", tmp_path) >= 40, tmp_path)
     assert_clean_interrupt(code, err, peak)
     frames = jsonl.read_text().splitlines()
     assert len(frames) >= 40 and len(frames) % 40 == 0  # whole tracks, 2 runs × 20 frames
@@ -124,7 +124,7 @@ def test_compare_over_a_huge_range_streams_and_keeps_its_scenarios(tmp_path: Pat
     code, stdout, err, peak = run_until(
         ["compare", "--no-thesis", "--seeds", "0:100000000", "--max-frames", "10", "--out",
          str(out), "--json"],
-        lambda: _lines(".compare.*.tmp.jsonl", out) >= 1, tmp_path)
+        lambda: _lines(".tfalda-sim-*.tmp.jsonl", out) >= 1, tmp_path)
     assert_clean_interrupt(code, err, peak)
     done = len((out / "compare.jsonl").read_text().splitlines())
     result = json.loads(stdout)

@@ -10,55 +10,64 @@ invalid track, laps not completed), 2 bad input, 130 stopped by Ctrl-C.
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import sys
 from collections.abc import Sequence
 
-from .agents import command as agents_command
-from .cli_common import EXIT_BAD_INPUT, EXIT_NEGATIVE, EXIT_OK, CliError, interrupted
-from .evaluation import command as evaluation_command
+from .cli_common import EXIT_BAD_INPUT, EXIT_NEGATIVE, CliError, interrupted
+from .interrupts import stop_signals_interrupt
 from .outputs import OutputError
-from .rendering import command as rendering_command
-from .replay import command as replay_command
-from .tracks import command as tracks_command
 
-COMMAND_MODULES = (tracks_command, rendering_command, evaluation_command, agents_command,
-                   replay_command)
-"""The domains' command modules, in the order ``tfalda-sim --help`` lists them."""
+COMMAND_MODULES: tuple[str, ...] = ("tracks.command", "rendering.command", "evaluation.command",
+                                    "agents.command", "replay.command")
+"""The domains' command modules (under ``tfalda_sim``), in the order ``--help`` lists them;
+imported by ``build_parser``, inside ``main``'s error handling (numba, OpenCV and the
+rest take most of a second to import: a Ctrl-C then must not print a traceback)."""
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="tfalda-sim", description="Carolo-Cup lane-keeping simulator (tfalda-sim).")
     sub = parser.add_subparsers(dest="command", required=True)
-    for module in COMMAND_MODULES:
-        module.register(sub)
+    for name in COMMAND_MODULES:
+        importlib.import_module(f"tfalda_sim.{name}").register(sub)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command and return its exit code (``tfalda_sim.cli_common``); a bad
     argument is reported with the usage and returns 2 (``--help`` returns 0)."""
+    with stop_signals_interrupt():  # SIGTERM and SIGHUP take Ctrl-C's clean path
+        return _run(argv)
+
+
+def _run(argv: Sequence[str] | None) -> int:
     try:
-        args = build_parser().parse_args(argv)
-    except SystemExit as exc:  # argparse has printed the usage and the error
-        return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
-    try:
-        return int(args.func(args))
+        try:
+            parser = build_parser()
+            args = parser.parse_args(argv)
+        except SystemExit as exc:  # argparse has printed the usage and the error
+            return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
+        code = int(args.func(args))
+        sys.stdout.flush()  # a closed pipe shows here, inside the handling below
+        return code
     except (CliError, OutputError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except SystemExit as exc:  # a handler's parser.error(): usage and message printed
         return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
     except KeyboardInterrupt:
-        # The long commands catch Ctrl-C themselves and keep what they finished; here
-        # it struck before any result existed.
-        return interrupted("stopped before any result was finished; nothing written")
+        # The long commands catch Ctrl-C themselves and keep what they finished; here it
+        # struck while nothing could be kept (starting up, or before a first result).
+        return interrupted("nothing written")
     except BrokenPipeError:
-        # stdout closed by its reader (`… | head`): the files are written, stop quietly.
+        # stdout or stderr closed by its reader (`… | head`): stop quietly. What was
+        # committed before stays; the result did not all reach the reader: exit 1.
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
-        return EXIT_OK
+        os.dup2(devnull, sys.stderr.fileno())
+        return EXIT_NEGATIVE
     except OSError as exc:
         print(f"error: {exc.strerror or exc}"
               + (f": {exc.filename}" if exc.filename else ""), file=sys.stderr)

@@ -3,26 +3,33 @@ argument types, the output check and the Ctrl-C message.
 
 Exit codes: 0 success; 1 the command ran and the result is negative (an invalid track,
 laps not completed); 2 bad input (unreadable file, bad option, refused overwrite);
-130 stopped by Ctrl-C (what was finished is kept and named).
+130 stopped by Ctrl-C (143 SIGTERM, 129 SIGHUP; what was finished is kept and named).
+An unexpected error (a bug) also exits 1, with one line naming it.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import signal
 import sys
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
+from .interrupts import ignoring_stops, last_stop_signal
 from .outputs import DIRECTORY, Output, OutputError
 from .outputs import check_outputs as _check_outputs
-from .parallel import resolve_workers
+from .parallel import WorkerDied, resolve_workers
+
+R = TypeVar("R")
 
 EXIT_OK: int = 0
 EXIT_NEGATIVE: int = 1
 EXIT_BAD_INPUT: int = 2
 EXIT_INTERRUPTED: int = 130
-"""128 + SIGINT, the shell's code for a Ctrl-C."""
+"""128 + SIGINT, the shell's code for a Ctrl-C (SIGTERM: 143, SIGHUP: 129)."""
 
 __all__ = [
     "DIRECTORY",
@@ -147,11 +154,13 @@ def positive_int_arg(text: str) -> int:
     return value
 
 
-def speed_arg_for(top_speed_m_s: float) -> Callable[[str], float]:
-    """argparse type of every ``--speed``: a cruise speed in (0, ``top_speed_m_s``] [m/s]
-    (the car's top speed, ``tfalda_sim.vehicle.CarParams.max_speed_m_s``)."""
-    return bounded_float_arg(0.0, top_speed_m_s, "m/s", low_open=True,
-                             why="the car's top speed")
+def speed_arg_for(min_speed_m_s: float,
+                  top_speed_m_s: float) -> Callable[[str], float]:
+    """argparse type of every ``--speed``: a cruise speed in [``min_speed_m_s``,
+    ``top_speed_m_s``] [m/s] (``tfalda_sim.vehicle.MIN_CRUISE_SPEED_M_S`` and the car's
+    top speed)."""
+    return bounded_float_arg(min_speed_m_s, top_speed_m_s, "m/s",
+                             why="from a crawl to the car's top speed")
 
 
 def check_outputs(paths: Mapping[str, Path | None], suffixes: Mapping[str, str], force: bool,
@@ -181,9 +190,12 @@ def workers_arg_value(requested: int | None, jobs: int | None) -> int:
 
 
 def interrupted(kept: str) -> int:
-    """After a Ctrl-C: one line on stderr saying what was kept; the exit code 130."""
-    print(f"interrupted (Ctrl-C): {kept}", file=sys.stderr)
-    return EXIT_INTERRUPTED
+    """After a Ctrl-C (or SIGTERM, SIGHUP): one line on stderr saying what was kept; the
+    exit code 128 + the signal (130 for Ctrl-C)."""
+    sig = last_stop_signal()
+    name = "Ctrl-C" if sig == signal.SIGINT else signal.Signals(sig).name
+    print(f"interrupted ({name}): {kept}", file=sys.stderr)
+    return 128 + int(sig)
 
 
 # Options every command spells the same way.
@@ -203,3 +215,46 @@ def add_workers_option(parser: argparse.ArgumentParser, what: str = "jobs") -> N
     parser.add_argument("--workers", type=positive_int_arg,
                         help=f"processes (default: the CPUs available; capped at the {what}, "
                              "the CPUs and the memory)")
+
+
+@dataclass
+class SweepEnd:
+    """How a sweep's stream of results ended: completely, by Ctrl-C (or SIGTERM, SIGHUP),
+    or because a worker process died (``worker_died``: the message)."""
+
+    interrupted: bool = False
+    worker_died: str | None = None
+
+    @property
+    def early(self) -> bool:
+        return self.interrupted or self.worker_died is not None
+
+
+def consume(results: Iterator[R], handle: Callable[[R], None]) -> SweepEnd:
+    """Pass every result of a sweep to ``handle`` until the stream ends, is interrupted or
+    loses a worker; the pool is shut down either way (shielded from a second Ctrl-C)."""
+    end = SweepEnd()
+    try:
+        for result in results:
+            handle(result)
+    except KeyboardInterrupt:
+        end.interrupted = True
+    except WorkerDied as exc:
+        end.worker_died = str(exc)
+    finally:
+        with ignoring_stops():
+            close = getattr(results, "close", None)
+            if close is not None:
+                close()
+    return end
+
+
+def sweep_exit(end: SweepEnd, kept: str) -> int:
+    """The exit code of a sweep that ended as ``end``, saying what was ``kept`` if it
+    ended early (a dead worker: an error, exit 1; an interrupt: ``interrupted``)."""
+    if end.worker_died is not None:
+        print(f"error: {end.worker_died}; {kept}", file=sys.stderr)
+        return EXIT_NEGATIVE
+    if end.interrupted:
+        return interrupted(kept)
+    return EXIT_OK

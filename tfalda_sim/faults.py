@@ -21,6 +21,34 @@ from typing import Protocol
 import numpy as np
 
 from tfalda_sim.tracks import Gap, Line, Track
+from tfalda_sim.tracks.model import MAX_TRACK_LENGTH_M
+
+MAX_GAIN: float = 255.0
+"""Largest overexposure gain [-]: every grey level ≥ 1 DN saturates at it already."""
+
+MAX_DN: float = 255.0
+"""Largest grey level of the 8-bit camera [DN]."""
+
+MAX_GLARE_RADIUS_PX: float = 1000.0
+"""Largest glare radius [px]: beyond the 752×480 frame's diagonal (893 px) a blob is a
+uniform brightening (an image quantity: the glare lives on the sensor, not the ground)."""
+
+MAX_SHAKE_RAD: float = math.pi
+"""Largest camera-shake amplitude [rad]: half a turn either way."""
+
+MAX_KICK_M: float = 1.0
+"""Largest lateral kick [m]: beyond the 0.82 m road, a kick is a teleport."""
+
+MAX_STEP: int = 10**9
+"""Last step a fault may start at (a billion frames: 230 days at 50 frames/s)."""
+
+
+def _within(name: str, value: float, low: float, high: float, unit: str = "") -> None:
+    if isinstance(value, bool | str | bytes) or not hasattr(value, "__float__"):
+        raise TypeError(f"{name} must be a real number, got {value!r}")
+    if not (math.isfinite(float(value)) and low <= value <= high):
+        raise ValueError(f"{name} must be finite and in [{low:g}, {high:g}]{unit}, got "
+                         f"{value!r}")
 
 
 def _check(fault: object) -> None:
@@ -32,10 +60,11 @@ def _check(fault: object) -> None:
             continue
         if not math.isfinite(v):
             raise ValueError(f"{name}.{f.name} must be finite, got {v!r}")
-        if f.name == "step" and v < 1:
-            raise ValueError(f"{name}.step must be ≥ 1 (the first step() is step 1), got {v}")
-        if f.name == "duration" and v < 1:
-            raise ValueError(f"{name}.duration must be ≥ 1 step, got {v}")
+        if f.name == "step" and not 1 <= v <= MAX_STEP:
+            raise ValueError(f"{name}.step must be in [1, {MAX_STEP}] (the first step() is "
+                             f"step 1), got {v}")
+        if f.name == "duration" and not 1 <= v <= MAX_STEP:
+            raise ValueError(f"{name}.duration must be in [1, {MAX_STEP}] steps, got {v}")
 
 
 @dataclass(frozen=True)
@@ -59,8 +88,7 @@ class Overexposure:
 
     def __post_init__(self) -> None:
         _check(self)
-        if self.gain < 0:
-            raise ValueError(f"Overexposure.gain must be ≥ 0, got {self.gain}")
+        _within("Overexposure.gain", self.gain, 0.0, MAX_GAIN)
 
 
 @dataclass(frozen=True)
@@ -77,8 +105,13 @@ class Glare:
 
     def __post_init__(self) -> None:
         _check(self)
-        if self.radius_px <= 0 or self.peak_dn < 0:
-            raise ValueError("Glare.radius_px must be > 0 and Glare.peak_dn ≥ 0")
+        if self.radius_px <= 0:
+            raise ValueError(f"Glare.radius_px must be > 0, got {self.radius_px!r}")
+        _within("Glare.radius_px", self.radius_px, 0.0, MAX_GLARE_RADIUS_PX, " px")
+        _within("Glare.peak_dn", self.peak_dn, 0.0, MAX_DN, " DN")
+        # The centre may lie off the frame (a lamp just outside the view), not far off.
+        _within("Glare.u_px", self.u_px, -MAX_GLARE_RADIUS_PX, 2 * MAX_GLARE_RADIUS_PX, " px")
+        _within("Glare.v_px", self.v_px, -MAX_GLARE_RADIUS_PX, 2 * MAX_GLARE_RADIUS_PX, " px")
 
 
 @dataclass(frozen=True)
@@ -92,8 +125,7 @@ class CameraShake:
 
     def __post_init__(self) -> None:
         _check(self)
-        if self.amplitude_rad < 0:
-            raise ValueError(f"CameraShake.amplitude_rad must be ≥ 0, got {self.amplitude_rad}")
+        _within("CameraShake.amplitude_rad", self.amplitude_rad, 0.0, MAX_SHAKE_RAD, " rad")
 
 
 @dataclass(frozen=True)
@@ -106,6 +138,7 @@ class LateralKick:
 
     def __post_init__(self) -> None:
         _check(self)
+        _within("LateralKick.offset_m", self.offset_m, -MAX_KICK_M, MAX_KICK_M, " m")
 
 
 @dataclass(frozen=True)
@@ -121,6 +154,8 @@ class MarkingGap:
         _check(self)
         if self.length_m <= 0:
             raise ValueError(f"MarkingGap.length_m must be > 0, got {self.length_m}")
+        _within("MarkingGap.length_m", self.length_m, 0.0, MAX_TRACK_LENGTH_M, " m")
+        _within("MarkingGap.s_m", self.s_m, -MAX_TRACK_LENGTH_M, MAX_TRACK_LENGTH_M, " m")
         if not self.lines or not all(isinstance(v, Line) for v in self.lines):
             raise ValueError(f"MarkingGap.lines must be tfalda_sim.tracks.Line members, got "
                              f"{self.lines}")

@@ -90,8 +90,9 @@ def check_outputs(outputs: Iterable[Output], *, force: bool,
                   files_in: Mapping[str, Iterable[str]] | None = None) -> None:
     """Refuse outputs that cannot be written as asked, before any work (module rules).
     ``inputs``: the command's input files by option (an output may not replace one);
-    ``files_in``: for a ``DIRECTORY`` output, the names of the files it will get (each
-    existing one needs ``force``)."""
+    ``files_in``: for a ``DIRECTORY`` output, the names of the entries it will get, folders
+    ending in ``/`` (each existing one needs ``force``; a folder where a file goes, or a
+    file where a folder goes, is refused)."""
     outs = list(outputs)
     files_in = files_in or {}
     for out in outs:
@@ -109,8 +110,20 @@ def check_outputs(outputs: Iterable[Output], *, force: bool,
         if p.exists() and not os.access(p, os.W_OK) and os.geteuid() != 0:
             raise OutputError(f"{out.option} {p} is read-only; choose another path")
     targets = [(o.option, o.path) for o in outs if o.suffix != DIRECTORY]
-    targets += [(o.option, o.path / name) for o in outs if o.suffix == DIRECTORY
-                for name in files_in.get(o.option, ())]
+    for o in outs:
+        if o.suffix != DIRECTORY:
+            continue
+        for name in files_in.get(o.option, ()):
+            entry = o.path / name.rstrip("/")
+            if name.endswith("/"):
+                if entry.exists() and not entry.is_dir():
+                    raise OutputError(f"{o.option} {o.path}: {entry} is a file where the "
+                                      "command writes a folder; move it away")
+            else:
+                if entry.is_dir():
+                    raise OutputError(f"{o.option} {o.path}: {entry} is a folder where the "
+                                      "command writes a file; move it away")
+            targets.append((o.option, entry))
     for i, (opt_a, a) in enumerate(targets):
         for opt_b, b in targets[i + 1:]:
             if _same(a, b):
@@ -155,13 +168,20 @@ class Outputs:
         if target in self._staged:
             return self._staged[target]
         self._makedirs(target.parent)
-        tmp = target.parent / f".{target.stem}.{secrets.token_hex(4)}.tmp{target.suffix}"
+        # Short: a long target name must not become an over-long temporary one.
+        tmp = target.parent / f".tfalda-sim-{secrets.token_hex(4)}.tmp{target.suffix}"
         self._staged[target] = tmp
         return tmp
 
     def commit(self) -> list[Path]:
         """Put every written temporary file in place; returns the targets written (a
-        target whose temporary file was never created is skipped)."""
+        target whose temporary file was never created is skipped). Every target is
+        checked before the first one is replaced: a folder in a file's place (made since
+        the check) fails the whole commit, naming the target."""
+        for target, tmp in self._staged.items():
+            if tmp.exists() and target.is_dir():
+                raise OutputError(f"cannot write {target}: a folder is in its place; "
+                                  "nothing was written")
         for target, tmp in self._staged.items():
             if tmp.exists():
                 publish(tmp, target)

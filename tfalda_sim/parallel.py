@@ -15,12 +15,14 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import multiprocessing
 import os
 import signal
 import sys
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from typing import TypeVar
 
 J = TypeVar("J")
@@ -34,7 +36,15 @@ WORKER_MEMORY_BYTES: int = 600 * 2**20
 """Memory one sweep worker may need (renderer pixel geometry, scene raster, numba):
 ≈ 350–450 MB measured for an ``evaluate``/``stress`` worker, with margin [bytes]."""
 
+WORKER_JOIN_TIMEOUT_S: float = 5.0
+"""How long an interrupted sweep waits for a terminated worker to exit [s]."""
+
 _PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+class WorkerDied(RuntimeError):
+    """A worker process of a sweep ended abruptly (killed, e.g. by the kernel when memory
+    ran out): the jobs in flight are lost, the results before them are not."""
 
 
 def available_cpus() -> int:
@@ -83,8 +93,12 @@ def resolve_workers(requested: int | None, jobs: int | None) -> tuple[int, str |
 
 
 def _init_worker(parent_pid: int) -> None:
-    # Ctrl-C reaches the whole process group; only the parent decides what to do.
+    # Ctrl-C reaches the whole process group; only the parent decides what to do. The
+    # parent's SIGTERM/SIGHUP handlers (tfalda_sim.interrupts) are not the worker's: the
+    # parent terminates its workers with SIGTERM.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
     if sys.platform.startswith("linux"):
         with contextlib.suppress(OSError, AttributeError):
             libc = ctypes.CDLL(None, use_errno=True)
@@ -108,7 +122,7 @@ def _terminate(pool: ProcessPoolExecutor) -> None:
             proc.terminate()
     for proc in procs:
         with contextlib.suppress(Exception):
-            proc.join(timeout=5)
+            proc.join(timeout=WORKER_JOIN_TIMEOUT_S)
 
 
 def stream(fn: Callable[[J], R], jobs: Iterable[J], *, workers: int = 1) -> Iterator[R]:
@@ -121,8 +135,12 @@ def stream(fn: Callable[[J], R], jobs: Iterable[J], *, workers: int = 1) -> Iter
         for job in jobs:
             yield fn(job)
         return
+    # fork on Linux, also where it is not the default (3.14+: forkserver): the workers must
+    # be our children for PR_SET_PDEATHSIG to tie them to this process.
+    context = (multiprocessing.get_context("fork") if sys.platform.startswith("linux")
+               else None)
     pool = ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
-                               initargs=(os.getpid(),))
+                               initargs=(os.getpid(),), mp_context=context)
     finished = False
     try:
         pending: deque[Future[R]] = deque()
@@ -133,7 +151,11 @@ def stream(fn: Callable[[J], R], jobs: Iterable[J], *, workers: int = 1) -> Iter
             if len(pending) >= limit:
                 break
         while pending:
-            result = pending.popleft().result()
+            try:
+                result = pending.popleft().result()
+            except BrokenProcessPool:
+                raise WorkerDied("a worker process died (killed, perhaps for lack of "
+                                 "memory: try fewer --workers)") from None
             for job in it:
                 pending.append(pool.submit(fn, job))
                 break

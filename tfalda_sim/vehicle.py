@@ -19,6 +19,11 @@ WHEELBASE_M: float = 0.26
 MAX_SPEED_M_S: float = 8.3
 """Design top speed of the thesis' car [m/s] (thesis 1.1, REFERENCE.md)."""
 
+MIN_CRUISE_SPEED_M_S: float = 0.05
+"""Slowest cruise speed accepted [m/s] (ours: 5 cm/s, about the crawl of a 1:10 car; a
+lap of the 53 m longest generated track then takes 53,000 frames — anything slower is no
+drive, and a speed near 0 turns per-metre quantities into overflows)."""
+
 MAX_STEER_RAD: float = 0.44
 """Largest front-wheel angle [rad] (≈ 25°, a typical 1:10 chassis: turning radius 0.55 m
 at the rear axle, tighter than any curve the rules allow)."""

@@ -34,7 +34,7 @@ class VideoWriter:
         if not (np.isfinite(fps) and fps > 0):
             raise ValueError(f"fps must be finite and > 0, got {fps}")
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.stem}.", suffix=".mp4",
+        fd, tmp = tempfile.mkstemp(prefix=".tfalda-sim-", suffix=".mp4",
                                    dir=self.path.parent)
         os.close(fd)
         self._tmp = Path(tmp)

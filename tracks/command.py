@@ -152,7 +152,7 @@ def resolve_track_arg(text: str) -> Track:
     """A named track, a seed (generated track) or a track file."""
     if text in NAMED_TRACKS:
         return load_track(named_path(text))
-    if text.isdigit():
+    if text.isascii() and text.isdigit():  # "²".isdigit() is True, int("²") fails
         return generate(int(text))
     path = Path(text)
     if path.suffix.lower() == ".json":

@@ -17,20 +17,24 @@ import numpy as np
 from ..cli_common import (
     DIRECTORY,
     CliError,
+    SweepEnd,
     add_force_option,
     add_json_option,
     add_workers_option,
     bounded_float_arg,
     bounded_int_arg,
     check_outputs,
-    interrupted,
+    consume,
     seed_range_arg,
     speed_arg_for,
+    sweep_exit,
     workers_arg_value,
 )
+from ..interrupts import ignoring_stops
 from ..perception import DetectorConfig, LaneObservation
+from ..perception.params import IMAGE_WIDTH_PX
 from ..rendering import FrameTruth
-from ..vehicle import CarParams
+from ..vehicle import MIN_CRUISE_SPEED_M_S, CarParams
 from .metrics import EPSILON_PX
 from .runner import WITH_LIS, WITHOUT_LIS, run_scenario
 from .scenarios import (
@@ -77,12 +81,15 @@ def _evaluate_parser(sub: Any) -> None:
                       help="only the run without the LIS (default: with and without)")
     runs.add_argument("--ablation", action="store_true",
                       help="run the LIS ablation: each stage off alone and on alone")
-    ev.add_argument("--preset", choices=sorted(PRESETS), default="thesis",
-                    help="the configuration of the run with the LIS (default: thesis)")
-    ev.add_argument("--epsilon-px", type=bounded_float_arg(0.0, 752.0, "px"),
+    ev.add_argument("--preset", choices=sorted(PRESETS),
+                    help="the configuration of the run with the LIS (default: thesis); not "
+                         "with --no-lis, which has no such run")
+    ev.add_argument("--epsilon-px", type=bounded_float_arg(0.0, IMAGE_WIDTH_PX, "px",
+                                                           why="up to the image width"),
                     default=EPSILON_PX,
                     help=f"hit distance of the black-box test [px] (default {EPSILON_PX:g})")
-    ev.add_argument("--speed", type=speed_arg_for(CarParams().max_speed_m_s),
+    ev.add_argument("--speed", type=speed_arg_for(MIN_CRUISE_SPEED_M_S,
+                                                  CarParams().max_speed_m_s),
                     default=THESIS_SPEED_M_S,
                     help=f"car speed [m/s] (default {THESIS_SPEED_M_S:.3f}: 15 km/h; at most "
                          "the car's top speed)")
@@ -112,6 +119,10 @@ def _configs(args: argparse.Namespace) -> dict[str, DetectorConfig]:
 
 
 def _check(args: argparse.Namespace) -> None:
+    if args.no_lis and args.preset is not None:
+        args.parser.error("--preset configures the run with the LIS; --no-lis runs only the "
+                          "one without it: drop one of them")
+    args.preset = args.preset or "thesis"
     random = args.scenario == ScenarioKind.RANDOM.value
     if random and args.seeds is None:
         args.parser.error("--scenario random needs --seeds A:B (e.g. --seeds 0:50)")
@@ -146,33 +157,30 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
                            "stride": args.stride, "runs": list(configs)}
     with Outputs() as outs:
         if kind is ScenarioKind.RANDOM and len(args.seeds) > 1:
-            stopped = _evaluate_seeds(args, configs, out, outs, progress)
+            end = _evaluate_seeds(args, configs, out, outs, progress)
         else:
-            stopped = _evaluate_one(args, configs, kind, out, outs, progress)
-        if stopped and "frames_done" not in out and not out.get("per_seed"):
+            end = _evaluate_one(args, configs, kind, out, outs, progress)
+        if end.early and "frames_done" not in out and not out.get("per_seed"):
             outs.abort()
-            return interrupted("no frame had been evaluated; nothing written")
-        outs.commit()
+            return sweep_exit(end, "no frame had been evaluated; nothing written")
+        with ignoring_stops():
+            outs.commit()
     if args.json:
         print(json.dumps(out))
     else:
         _print_table(out)
-    if stopped:
-        what = (f"kept the {out['tracks_done']} of {len(args.seeds)} tracks that had finished"
-                if "tracks_done" in out else
-                f"kept the {out['frames_done']} frames evaluated so far")
-        files = [out[k] for k in ("plot", "xml", "jsonl", "video") if k in out]
-        return interrupted(what + (f" ({', '.join(files)})" if files else ""))
-    return 0
+    what = (f"kept the {out['tracks_done']} of {len(args.seeds)} tracks that had finished"
+            if "tracks_done" in out else f"kept the {out['frames_done']} frames evaluated so far")
+    files = [out[k] for k in ("plot", "xml", "jsonl", "video") if k in out]
+    return sweep_exit(end, what + (f" ({', '.join(files)})" if files else ""))
 
 
 def _evaluate_seeds(args: argparse.Namespace, configs: Mapping[str, DetectorConfig],
-                    out: dict[str, Any], outs: Any, progress: bool) -> bool:
+                    out: dict[str, Any], outs: Any, progress: bool) -> SweepEnd:
     """A range of generated tracks, streamed: each finished track goes to --jsonl and to
-    the pooled tallies, then is dropped. Returns whether Ctrl-C stopped it."""
+    the pooled tallies, then is dropped. Returns how the stream ended."""
     from tqdm import tqdm
 
-    from .charts import plot_ablation, plot_seeds
     from .export import frame_records
     from .sweep import PooledTally, iter_seeds
 
@@ -180,7 +188,6 @@ def _evaluate_seeds(args: argparse.Namespace, configs: Mapping[str, DetectorConf
     tallies = {label: PooledTally() for label in configs}
     per_seed: list[dict[str, Any]] = []
     lines = 0
-    stopped = False
     with contextlib.ExitStack() as stack:
         fh = (stack.enter_context(open(outs.path(args.jsonl), "w", encoding="utf-8"))
               if args.jsonl is not None else None)
@@ -189,29 +196,38 @@ def _evaluate_seeds(args: argparse.Namespace, configs: Mapping[str, DetectorConf
         results = iter_seeds(args.seeds, configs, workers=workers, epsilon_px=args.epsilon_px,
                              speed_m_s=args.speed, stride=args.stride,
                              max_frames=args.max_frames)
-        try:
-            for runs in results:
-                for label, run in runs.items():
-                    tallies[label].add(run)
-                    per_seed.append(run.summary())
-                    if fh is not None:
-                        for rec in frame_records(run):
-                            fh.write(json.dumps(rec, allow_nan=False) + "\n")
-                            lines += 1
+
+        def keep(runs: Mapping[str, Any]) -> None:
+            nonlocal lines
+            for label, run in runs.items():
+                tallies[label].add(run)
+                per_seed.append(run.summary())
                 if fh is not None:
-                    fh.flush()  # a finished track is on disk at once
-                bar.update()
-        except KeyboardInterrupt:
-            stopped = True
-        finally:
-            results.close()
+                    for rec in frame_records(run):
+                        fh.write(json.dumps(rec, allow_nan=False) + "\n")
+                        lines += 1
+            if fh is not None:
+                fh.flush()  # a finished track is on disk at once
+            bar.update()
+
+        end = consume(results, keep)
     out["seeds"] = [args.seeds.start, args.seeds.stop]
     out["tracks_done"] = len(per_seed) // len(configs)
-    out["interrupted"] = stopped
+    out["interrupted"] = end.early
     out["per_seed"] = per_seed
     if not per_seed:
-        return stopped
-    out["pooled"] = {label: t.summary() for label, t in tallies.items()}
+        return end
+    with ignoring_stops():  # a second Ctrl-C must not lose the first one's results
+        out["pooled"] = {label: t.summary() for label, t in tallies.items()}
+        _write_seed_outputs(args, configs, out, outs, per_seed, lines)
+    return end
+
+
+def _write_seed_outputs(args: argparse.Namespace, configs: Mapping[str, DetectorConfig],
+                        out: dict[str, Any], outs: Any, per_seed: list[dict[str, Any]],
+                        lines: int) -> None:
+    from .charts import plot_ablation, plot_seeds
+
     if args.plot is not None:
         if args.ablation:
             rows = [{"config": label, **out["pooled"][label]} for label in configs]
@@ -222,24 +238,21 @@ def _evaluate_seeds(args: argparse.Namespace, configs: Mapping[str, DetectorConf
     if args.jsonl is not None:
         out["jsonl_lines"] = lines
         out["jsonl"] = str(args.jsonl)
-    return stopped
 
 
 def _evaluate_one(args: argparse.Namespace, configs: Mapping[str, DetectorConfig],
-                  kind: ScenarioKind, out: dict[str, Any], outs: Any, progress: bool) -> bool:
-    """One track, run in this process (so a video records this very run). Returns
-    whether Ctrl-C stopped it (the frames so far are then reported and written)."""
+                  kind: ScenarioKind, out: dict[str, Any], outs: Any, progress: bool
+                  ) -> SweepEnd:
+    """One track, run in this process (so a video records this very run). Returns how it
+    ended (after a Ctrl-C the frames so far are reported and written)."""
     from ..video import VideoWriter
-    from .charts import plot_ablation, plot_confidence
-    from .export import write_jsonl, write_lanes_xml
     from .runner import ScenarioInterrupted
-    from .sweep import pooled_summary
 
     scenario = (generated_scenario(args.seeds.start, speed_m_s=args.speed,
                                    stride=args.stride, max_frames=args.max_frames)
                 if kind is ScenarioKind.RANDOM
                 else thesis_scenario(kind, speed_m_s=args.speed, stride=args.stride))
-    stopped = False
+    end = SweepEnd()
     with contextlib.ExitStack() as stack:
         hook = None
         if args.video is not None:
@@ -250,11 +263,23 @@ def _evaluate_one(args: argparse.Namespace, configs: Mapping[str, DetectorConfig
             single = run_scenario(scenario, configs, epsilon_px=args.epsilon_px,
                                   progress=progress, on_frame=hook)
         except ScenarioInterrupted as exc:
-            stopped = True
+            end.interrupted = True
             if exc.results is None:
-                return True
+                return end
             single = exc.results
-    out["interrupted"] = stopped
+        stack.enter_context(ignoring_stops())  # closing the video, writing the rest
+        _write_one_outputs(args, configs, kind, out, outs, single, end)
+    return end
+
+
+def _write_one_outputs(args: argparse.Namespace, configs: Mapping[str, DetectorConfig],
+                       kind: ScenarioKind, out: dict[str, Any], outs: Any,
+                       single: Mapping[str, Any], end: SweepEnd) -> None:
+    from .charts import plot_ablation, plot_confidence
+    from .export import write_jsonl, write_lanes_xml
+    from .sweep import pooled_summary
+
+    out["interrupted"] = end.early
     out["frames_done"] = len(next(iter(single.values())).seq)
     if args.video is not None:
         out["video"] = str(args.video)
@@ -278,7 +303,6 @@ def _evaluate_one(args: argparse.Namespace, configs: Mapping[str, DetectorConfig
     if args.jsonl is not None:
         out["jsonl_lines"] = write_jsonl(single.values(), outs.path(args.jsonl))
         out["jsonl"] = str(args.jsonl)
-    return stopped
 
 
 def _primary_label(configs: Mapping[str, Any]) -> str:
@@ -337,6 +361,8 @@ def _thesis_list(text: str) -> tuple[str, ...]:
     if bad or not kinds:
         raise argparse.ArgumentTypeError(
             f"--thesis takes straight, curve and/or track, comma-separated; got {text[:60]!r}")
+    if len(set(kinds)) != len(kinds):  # it would run twice and be pooled with itself
+        raise argparse.ArgumentTypeError(f"--thesis names a scenario twice: {text[:60]!r}")
     return kinds
 
 
@@ -389,7 +415,6 @@ def cmd_compare(args: argparse.Namespace) -> int:
     workers = workers_arg_value(args.workers, jobs)
     progress = sys.stderr.isatty() or not args.json
     tally = CompareTally()
-    stopped = False
     with Outputs() as outs, contextlib.ExitStack() as stack:
         files = ({k: outs.path(args.out / f) for k, f in COMPARE_FILES.items()}
                  if args.out is not None else None)
@@ -399,40 +424,38 @@ def cmd_compare(args: argparse.Namespace) -> int:
                                        disable=not progress))
         results = iter_compare(thesis, seeds, max_frames=args.max_frames, workers=workers)
         job_names = itertools.chain(thesis, (f"seed {s}" for s in seeds))  # lazily
-        try:
-            for group, tallies in results:
-                tally.add(group, tallies)
-                if fh is not None:
-                    fh.write(json.dumps({"scenario": next(job_names), "group": group,
-                                         "detectors": {k: t.summary()
-                                                       for k, t in tallies.items()}}) + "\n")
-                    fh.flush()  # a finished scenario is on disk at once
-                bar.update()
-        except KeyboardInterrupt:
-            stopped = True
-        finally:
-            results.close()
+
+        def keep(job: tuple[str, Mapping[str, Any]]) -> None:
+            group, tallies = job
+            tally.add(group, tallies)
+            if fh is not None:
+                fh.write(json.dumps({"scenario": next(job_names), "group": group,
+                                     "detectors": {k: t.summary()
+                                                   for k, t in tallies.items()}}) + "\n")
+                fh.flush()  # a finished scenario is on disk at once
+            bar.update()
+
+        end = consume(results, keep)
         stack.close()
         if not tally.jobs:
             outs.abort()
-            return interrupted("no scenario had finished; nothing written")
-        result = tally.result(thesis, seeds, args.max_frames)
-        result.update(scenarios_done=tally.jobs, scenarios=jobs, interrupted=stopped)
-        table = markdown_table(result)
-        if files is not None:
-            files["json"].write_text(json.dumps(result, indent=1), encoding="utf-8")
-            files["md"].write_text(table, encoding="utf-8")
-            plot(result, files["png"])
-            result["out"] = {k: str(args.out / f) for k, f in COMPARE_FILES.items()}
-        outs.commit()
+            return sweep_exit(end, "no scenario had finished; nothing written")
+        with ignoring_stops():  # a second Ctrl-C must not lose the first one's results
+            result = tally.result(thesis, seeds, args.max_frames)
+            result.update(scenarios_done=tally.jobs, scenarios=jobs, interrupted=end.early)
+            table = markdown_table(result)
+            if files is not None:
+                files["json"].write_text(json.dumps(result, indent=1), encoding="utf-8")
+                files["md"].write_text(table, encoding="utf-8")
+                plot(result, files["png"])
+                result["out"] = {k: str(args.out / f) for k, f in COMPARE_FILES.items()}
+            outs.commit()
     if args.json:
         print(json.dumps(result))
     else:
         print(table, end="")
         if args.out is not None:
             print(f"wrote {', '.join(result['out'].values())}")
-    if stopped:
-        where = f" in {args.out}/ ({', '.join(COMPARE_FILES.values())})" if args.out else ""
-        return interrupted(f"kept the {tally.jobs} of {jobs} scenarios that had finished"
+    where = f" in {args.out}/ ({', '.join(COMPARE_FILES.values())})" if args.out else ""
+    return sweep_exit(end, f"kept the {tally.jobs} of {jobs} scenarios that had finished"
                            + where)
-    return 0

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from ..interrupts import ignoring_stops
 from ..perception import DetectorConfig, LaneObservation, TfaldaDetector
 from ..rendering import FrameTruth, Renderer, build_scene, frame_truth
 from .metrics import EPSILON_PX, LANE_FAILURE_HIT_RATE, score_frame, truth_distance
@@ -121,12 +122,13 @@ def run_scenario(scenario: Scenario, configs: Mapping[str, DetectorConfig], *,
         for k in frames:
             _run_frame(k, scenario, renderer, scene, detectors, records, epsilon_px, on_frame)
     except KeyboardInterrupt:
-        done = min(len(r) for r in records.values())
-        partial = None
-        if done:
-            partial = {label: _collect(label, scenario, configs[label], epsilon_px,
-                                       recs[:done], frames=done)
-                       for label, recs in records.items()}
+        with ignoring_stops():  # a second Ctrl-C must not lose the frames run so far
+            done = min(len(r) for r in records.values())
+            partial = None
+            if done:
+                partial = {label: _collect(label, scenario, configs[label], epsilon_px,
+                                           recs[:done], frames=done)
+                           for label, recs in records.items()}
         raise ScenarioInterrupted(partial) from None
     finally:
         frames.close()
@@ -170,7 +172,8 @@ def _collect(label: str, scenario: Scenario, config: DetectorConfig, epsilon_px:
     return RunResult(
         label=label, scenario=scenario.name, seed=scenario.seed, config=config,
         epsilon_px=epsilon_px,
-        seq=np.array(list(scenario.seqs))[:n], time_s=scenario.trajectory.times_s[:n].copy(),
+        seq=np.arange(scenario.first_seq, scenario.first_seq + n),
+        time_s=scenario.trajectory.times_s[:n].copy(),
         lanes=np.stack([o.lanes for o in obs]), d=np.stack([o.d for o in obs]),
         lam=np.stack([o.lam for o in obs]), rois=np.stack([o.rois for o in obs]),
         hit_rates=np.stack([s.hit_rates for s in sc]),

@@ -93,6 +93,11 @@ def thesis_scenario(kind: ScenarioKind, *, speed_m_s: float = THESIS_SPEED_M_S,
     return Scenario(kind.value, track, trajectory, first_seq=first)
 
 
+MAX_SCENARIO_FRAMES: int = 10**6
+"""Most frames of one scenario (5.5 hours of driving at 50 frames/s): its trajectory's
+arrays are made up front."""
+
+
 def generated_scenario(seed: int, *, params: GeneratorParams | None = None,
                        speed_m_s: float = THESIS_SPEED_M_S, stride: int = 1,
                        fps: float = FRAME_RATE_HZ, laps: float = 1.0,
@@ -105,6 +110,15 @@ def generated_scenario(seed: int, *, params: GeneratorParams | None = None,
     track = generate(seed, params)
     track = dataclasses.replace(track, obstacles=())
     step = speed_m_s * stride / fps
+    if not (math.isfinite(step) and step > 0):
+        raise ValueError(f"speed_m_s × stride / fps must be a finite step > 0 m, got {step}")
+    frames = laps * lane_length_m(track, -0.5 * track.lane_width_m) / step
+    if max_frames is not None:
+        frames = min(frames, max_frames)
+    if frames > MAX_SCENARIO_FRAMES:  # checked before the trajectory's arrays exist
+        raise ValueError(f"the drive would take {frames:.3g} frames, more than "
+                         f"MAX_SCENARIO_FRAMES = {MAX_SCENARIO_FRAMES}; drive faster, fewer "
+                         "laps or set max_frames")
     n = max(1, int(laps * lane_length_m(track, -0.5 * track.lane_width_m) / step))
     if max_frames is not None:
         if max_frames < 1:

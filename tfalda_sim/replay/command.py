@@ -35,9 +35,8 @@ def register(sub: Any) -> None:
                        help="passes over the video (default 1)")
     times.add_argument("--forever", action="store_true", help="loop until Ctrl-C")
     rp.add_argument("--hough-preset", choices=[p.value for p in HoughPreset],
-                    default=HoughPreset.SIMULATOR.value,
-                    help="Hough settings: the seed's numbers or the simulator preset "
-                         "(default; the seed's 0.9 threshold finds no rendered marking)")
+                    help="hough: the seed's numbers or the simulator preset (default; the "
+                         "seed's 0.9 threshold finds no rendered marking)")
     rp.add_argument("--out", type=Path, help="annotated MP4 (segments or ROIs and lanes)")
     rp.add_argument("--stages", action="store_true",
                     help="hough: write the seed's 2×2 stage view to --out instead")
@@ -48,6 +47,10 @@ def register(sub: Any) -> None:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     check_outputs({"out": args.out}, {"out": ".mp4"}, args.force, inputs={"video": args.video})
+    if args.hough_preset is not None and args.detector != Detector.HOUGH.value:
+        raise CliError("--hough-preset sets the Hough baseline; it does nothing with "
+                       f"--detector {args.detector}: drop it")
+    args.hough_preset = args.hough_preset or HoughPreset.SIMULATOR.value
     if args.stages and (args.detector != Detector.HOUGH.value or args.out is None):
         raise CliError("--stages writes the Hough stage view: use it with --detector hough "
                        "and --out F.mp4")

@@ -75,7 +75,7 @@ def test_tallies_add_up_and_summarise(straight_truth) -> None:
     assert s["frames"] == 2 and s["frames_without_line"] == 1
     assert s["lines_per_frame"] == 0.5 and s["ego_right_found"] == 0.5
     assert s["ego_left_found"] == 0.0
-    assert s["ms_per_frame_median"] == pytest.approx(2.0)
+    assert s["ms_per_frame_median"] == pytest.approx(2.0, abs=0.01)  # binned to 0.01 ms
     assert s["hit_rate"] == pytest.approx(0.5 * score_lines(right[None], straight_truth)
                                           .confidence)
 
@@ -83,7 +83,7 @@ def test_tallies_add_up_and_summarise(straight_truth) -> None:
 def test_every_detector_scores_the_same_frames() -> None:
     tallies = compare_scenario(generated_scenario(10000, max_frames=12))
     assert {t.frames for t in tallies.values()} == {12}
-    assert all(len(t.times_s) == 12 and min(t.times_s) > 0 for t in tallies.values())
+    assert all(len(t.times) == 12 and t.times.quantile(0.0) > 0 for t in tallies.values())
     for label in (TFALDA_LIS, HOUGH_SIMULATOR):
         s = tallies[label].summary()
         assert s["ego_right_found"] >= 0.8 and s["hit_rate"] > 0.8, (label, s)

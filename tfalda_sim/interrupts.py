@@ -1,0 +1,78 @@
+"""Stopping a long command: Ctrl-C, SIGTERM and SIGHUP take the same clean path.
+
+Inside ``stop_signals_interrupt()`` SIGTERM (``timeout``, a CI cancel, ``kill``) and SIGHUP
+(a closed terminal) raise ``KeyboardInterrupt`` as Ctrl-C does, so the commands' one
+interrupt path — keep what was finished, say what, exit ``128 + signal`` — serves all
+three. ``ignoring_stops()`` shields the few seconds in which a command saves what it
+finished: a second Ctrl-C there would otherwise throw away the first one's results.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+from collections.abc import Iterator
+from types import FrameType
+
+STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+"""The signals that stop a command cleanly."""
+
+_last_signal: int = signal.SIGINT
+
+
+def _raise_interrupt(signum: int, frame: FrameType | None) -> None:
+    global _last_signal
+    _last_signal = signum
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def _note_sigint(signum: int, frame: FrameType | None) -> None:
+    global _last_signal
+    _last_signal = signum
+    signal.default_int_handler(signum, frame)
+
+
+@contextlib.contextmanager
+def stop_signals_interrupt() -> Iterator[None]:
+    """Inside the block SIGTERM and SIGHUP raise KeyboardInterrupt (main thread only; a
+    signal ignored by whoever started us stays ignored, as Ctrl-C does under ``nohup``);
+    the handlers are restored after it."""
+    global _last_signal
+    _last_signal = signal.SIGINT
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    saved = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    if saved[signal.SIGINT] is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _note_sigint)
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        if saved[sig] is not signal.SIG_IGN:
+            signal.signal(sig, _raise_interrupt)
+    try:
+        yield
+    finally:
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
+
+
+def last_stop_signal() -> int:
+    """The signal of the last interrupt (SIGINT if none was seen)."""
+    return _last_signal
+
+
+@contextlib.contextmanager
+def ignoring_stops() -> Iterator[None]:
+    """Ignore the stop signals inside the block (saving what was finished), then restore
+    the handlers; a no-op outside the main thread."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    saved = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
