@@ -338,19 +338,10 @@ def _is_temporary(rel: str) -> bool:
     return ".tmp" in name or name.startswith(".tfalda-sim-probe")
 
 
-EVALUATE_AGENT_SWALLOWS_CTRL_C = False
-"""Known bug (``test_evaluate_agent_stops_at_ctrl_c_with_one_worker``): with one worker
-``evaluate-agent`` drives in-process and ``tfalda_sim.agents.drive.drive`` catches the Ctrl-C, so
-the interrupted drive is scored as a failed seed and the sweep goes on. Set to False
-once fixed: the fuzz then checks evaluate-agent's Ctrl-C too."""
-
-
 def _swallow_expected(argv: list[str]) -> bool:
     """Whether exit 0/1 after a Ctrl-C is what ``argv`` should do: ``replay --forever``
-    ends that way by design (a known bug excepted, see above)."""
-    if argv[0] == "replay" and any(a == "--forever" or a.startswith("--fo") for a in argv):
-        return True
-    return EVALUATE_AGENT_SWALLOWS_CTRL_C and argv[0] == "evaluate-agent"
+    ends that way by design."""
+    return argv[0] == "replay" and any(a == "--forever" or a.startswith("--fo") for a in argv)
 
 
 def check(outcome: Outcome, baseline: dict[str, Entry]) -> None:
@@ -767,17 +758,11 @@ def test_train_keeps_an_earlier_runs_tensorboard_logs(tmp_path: Path,
     assert (tmp_path / "run" / "policy.zip").is_file()
 
 
-@pytest.mark.xfail(EVALUATE_AGENT_SWALLOWS_CTRL_C, strict=True,
-                   reason="evaluate-agent with one worker: tfalda_sim.agents.drive.drive "
-                          "catches the "
-                          "Ctrl-C, the drive is scored as a failed seed, the sweep goes on, "
-                          "exit 0")
 def test_evaluate_agent_stops_at_ctrl_c_with_one_worker(baseline: dict[str, Entry]) -> None:
-    """Found by the fuzz. A Ctrl-C during a drive of ``evaluate-agent --workers 1`` must
-    end the sweep with 130; it is caught inside the drive instead, whose lap is then
-    scored as a failed seed (``failed_seeds``, ``success_rate``), ``"interrupted":
-    false``, and the next seed starts (from a shell, each Ctrl-C ends one drive). 1000
-    laps: the Ctrl-C surely lands in the drive, not in its set-up."""
+    """Found by the fuzz (fixed): a Ctrl-C during a drive of ``evaluate-agent --workers
+    1`` must end the sweep with 130 — it was caught inside the drive, whose lap was then
+    scored as a failed seed, and the next seed started. 1000 laps: the Ctrl-C surely lands
+    in the drive, not in its set-up."""
     outcome = run_cli(["evaluate-agent", "--seeds", "10003:10004", "--laps", "1000",
                        "--workers", "1", "--json"], baseline, budget_s=3.0)
     assert outcome.interrupted, str(outcome)

@@ -61,7 +61,7 @@ VERSION = 1
 __all__ = [
     "FORMAT", "MAX_FILE_BYTES", "MAX_GAPS", "MAX_HEADING_RAD", "MAX_INTERSECTIONS",
     "MAX_JSON_DEPTH", "MAX_LANE_WIDTH_M", "MAX_MAT_EXTENT_M", "MAX_OBSTACLES", "MAX_SEGMENTS",
-    "MAX_TRACK_LENGTH_M", "MIN_RADIUS_M", "VERSION", "TrackFileError",
+    "MAX_TRACK_LENGTH_M", "MIN_RADIUS_M", "MIN_SEGMENT_LENGTH_M", "VERSION", "TrackFileError",
     "load_track", "save_track", "track_from_dict", "track_to_dict",
 ]
 
@@ -94,6 +94,10 @@ Segment lengths have the tighter ``MAX_TRACK_LENGTH_M``."""
 MAX_HEADING_RAD: float = 100.0
 """Largest magnitude [rad] of the start heading (≈ 16 turns; headings mean the same
 modulo 2π and are written within ±π). Keeps ``heading + curvature × s`` exact to 1e-14."""
+
+MIN_SEGMENT_LENGTH_M: float = 0.001
+"""Shortest straight [m] (1 mm, a quarter of a map pixel): shorter ones are numerical
+noise, and a track of 1e-300 m pieces would validate as a point."""
 
 MIN_RADIUS_M: float = 0.001
 """Smallest arc radius [m] a file may give. The rules' minimum (≈ 1.41 m) is reported by
@@ -313,6 +317,10 @@ def _segment(r: _Reader, raw: Any, i: int, before_m: float) -> Straight | Arc:
         length = seg.number("length_m", limit=None)
         if length <= 0:
             seg.fail(f"must be > 0, got {length}", "length_m")
+        if length < MIN_SEGMENT_LENGTH_M:
+            seg.fail(f"{length:g} m is shorter than the shortest segment "
+                     f"{MIN_SEGMENT_LENGTH_M:g} m (tfalda_sim.tracks.fileformat."
+                     "MIN_SEGMENT_LENGTH_M)", "length_m")
         result: Straight | Arc = Straight(seg.within("length_m", length, _TRACK_LENGTH))
     else:
         seg = r.child(raw, f"segments[{i}]", {"type", "radius_m", "angle_rad"})

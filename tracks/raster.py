@@ -29,6 +29,10 @@ from .geometry import pose_at
 if TYPE_CHECKING:
     from .model import Track
 
+MAX_MAP_PIXELS: int = 400_000_000
+"""Largest marking map [px] (two uint8 layers: 800 MB): an 80 m × 80 m mat at the
+default 4 mm/px, four times the largest generated track's."""
+
 DEFAULT_RESOLUTION_M: float = 0.004
 """Default edge of a map pixel [m] (issue 2: at most 4 mm)."""
 
@@ -315,8 +319,11 @@ def rasterize(track: Track, resolution_m: float = DEFAULT_RESOLUTION_M,
     xmin, ymin, xmax, ymax = track.bounds(margin_m)
     n_cols = int(math.ceil((xmax - xmin) / resolution_m))
     n_rows = int(math.ceil((ymax - ymin) / resolution_m))
-    if n_cols * n_rows > 400_000_000:
-        raise ValueError(f"a {n_cols}×{n_rows} map is too large; use a coarser resolution_m")
+    if n_cols * n_rows > MAX_MAP_PIXELS:
+        raise ValueError(f"a {n_cols}×{n_rows} map is too large (more than MAX_MAP_PIXELS = "
+                         f"{MAX_MAP_PIXELS}: {math.sqrt(MAX_MAP_PIXELS) * resolution_m:.0f} m "
+                         f"square at {resolution_m * 1000:g} mm/px); use a coarser "
+                         "resolution_m")
     intensity = np.zeros((n_rows, n_cols), dtype=np.uint8)
     labels = np.zeros((n_rows, n_cols), dtype=np.uint8)
     t = track.table

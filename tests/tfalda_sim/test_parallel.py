@@ -117,9 +117,10 @@ def test_stress_says_when_it_caps_the_workers(monkeypatch: pytest.MonkeyPatch, t
         return iter(())
 
     monkeypatch.setattr("tfalda_sim.agents.stress.iter_battery", fake_battery)
-    main(["stress", "--seeds", "10000:10001", "--faults", "none", "--workers", "100000",
-          "--out", str(tmp_path / "s")])
+    code = main(["stress", "--seeds", "10000:10001", "--faults", "none", "--workers",
+                 "100000", "--out", str(tmp_path / "s")])
     err = capsys.readouterr().err
+    assert code == 0 and not (tmp_path / "s").exists()  # no run, nothing written
     assert seen["workers"] <= max(2, parallel.available_cpus())
     assert "--workers 100000 capped to" in err
 

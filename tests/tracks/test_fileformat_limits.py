@@ -341,3 +341,19 @@ def test_a_document_at_every_count_limit_fits_the_file_size_limit(tmp_path: Path
                * MAX_INTERSECTIONS,
                name="n" * 100, description="d" * 10_000)
     assert len(json.dumps(doc, indent=2)) < MAX_FILE_BYTES / 4
+
+
+def test_a_track_of_vanishing_segments_is_refused(tmp_path) -> None:
+    """100 straights of 1e-300 m validated as a closed track of 1e-298 m."""
+    import json
+
+    from tfalda_sim.tracks.fileformat import TrackFileError, load_track
+
+    doc = {"format": "tfalda-sim/track", "version": 1, "name": "dot", "closed": False,
+           "lane_width_m": 0.4, "start": {"x_m": 0, "y_m": 0, "heading_rad": 0},
+           "start_line_s_m": None,
+           "segments": [{"type": "straight", "length_m": 1e-300}] * 100}
+    path = tmp_path / "dot.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(TrackFileError, match="MIN_SEGMENT_LENGTH_M"):
+        load_track(path, check_rules=False)

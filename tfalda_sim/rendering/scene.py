@@ -29,6 +29,10 @@ WALL_TEXEL_M: float = 0.02
 ATLAS_GUARD: int = 4
 """Zero texels around every mip level in the atlas, so bilinear taps never bleed."""
 
+MAX_ATLAS_SIDE_TEXELS: int = 32767
+"""Longest side of the mip atlas [texels]: OpenCV's remap needs images below
+32767 × 32767 (a documented limitation; 131 m of mat at 4 mm per texel)."""
+
 
 @dataclass(frozen=True)
 class Hall:
@@ -85,7 +89,7 @@ def _atlas(level0: np.ndarray, wall: np.ndarray, min_size: int = 8
     right_h = sum(t.shape[0] + 2 * g for t in column)
     height = max(level0.shape[0] + 2 * g, right_h)
     width = level0.shape[1] + 2 * g + right_w
-    if max(height, width) >= 32767:
+    if max(height, width) >= MAX_ATLAS_SIDE_TEXELS:
         raise ValueError(f"marking map too large for the renderer ({width}×{height} texels); "
                          "use a coarser resolution")
     atlas = np.zeros((height, width), np.uint8)
