@@ -65,6 +65,19 @@ def _probe_writable(folder: Path) -> str | None:
     return None
 
 
+def _check_name_length(option: str, path: Path) -> None:
+    """Every part of ``path`` fits the file system's name limit (checked first: even
+    asking whether an over-long path exists fails)."""
+    try:
+        name_max = os.pathconf("/", "PC_NAME_MAX")
+    except (OSError, ValueError):
+        name_max = 255
+    too_long = [part for part in path.parts if len(os.fsencode(part)) > name_max]
+    if too_long:
+        raise OutputError(f"{option}: the name {too_long[0][:40]}… is longer than the "
+                          f"{name_max} bytes a file name may have; choose a shorter one")
+
+
 def _check_folder(option: str, path: Path, folder: Path) -> None:
     base = _nearest_existing(folder)
     if not base.is_dir():
@@ -97,6 +110,7 @@ def check_outputs(outputs: Iterable[Output], *, force: bool,
     files_in = files_in or {}
     for out in outs:
         p = out.path
+        _check_name_length(out.option, p)
         if out.suffix == DIRECTORY:
             if p.exists() and not p.is_dir():
                 raise OutputError(f"{out.option} {p} is a file; give a folder")

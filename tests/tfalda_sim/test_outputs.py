@@ -166,3 +166,10 @@ def test_an_output_may_not_replace_an_input(tmp_path: Path,
     check_outputs([Output("--out", out, ".png")], force=True, inputs={"--track": track})
     with pytest.raises(OutputError, match="is the --track input"):
         check_outputs([Output("--out", track, ".json")], force=True, inputs={"--track": track})
+
+
+def test_a_name_too_long_for_the_file_system_is_refused_first(tmp_path: Path) -> None:
+    with pytest.raises(OutputError, match="longer than the"):
+        check_outputs([Output("--plot", tmp_path / ("a" * 300 + ".png"), ".png")], force=True)
+    # a long name that fits still passes, its temporary name too (short, fixed length)
+    check_outputs([Output("--plot", tmp_path / ("a" * 248 + ".png"), ".png")], force=True)
