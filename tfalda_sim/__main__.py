@@ -2,6 +2,6 @@
 
 import sys
 
-from tfalda_sim.cli import main
+from tfalda_sim.cli import console_main
 
-sys.exit(main())
+sys.exit(console_main())

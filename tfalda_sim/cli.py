@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
 from collections.abc import Sequence
 
@@ -80,5 +81,15 @@ def _run(argv: Sequence[str] | None) -> int:
         return EXIT_NEGATIVE
 
 
+def console_main() -> int:
+    """The ``tfalda-sim`` console script: ``main``, then the stop signals ignored for the
+    rest of the process — the command is done, and a late second Ctrl-C during the
+    interpreter's shutdown would otherwise kill it and turn exit 130 into a signal death."""
+    code = main()
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_IGN)
+    return code
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(console_main())
