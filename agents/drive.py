@@ -21,6 +21,7 @@ from tqdm import tqdm
 
 from tfalda_sim.camera import FRAME_RATE_HZ
 from tfalda_sim.envs import TfaldaTrackEnv
+from tfalda_sim.interrupts import INTERRUPTS, is_interrupt
 from tfalda_sim.tracks import Track
 from tfalda_sim.video import VideoWriter
 
@@ -168,7 +169,9 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
                     obs, _ = env.reset(options={"track": track, "speed_m_s": speed_m_s,
                                                 "start": (info["s_m"], lane, 0.0)})
                     agent.reset()
-        except KeyboardInterrupt:
+        except INTERRUPTS as exc:
+            if not is_interrupt(exc):
+                raise
             # Ctrl-C ends the drive like its budget would: the videos so far are kept
             # (the writers are closed without an error) and the figures cover the frames
             # driven.

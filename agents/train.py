@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from tfalda_sim.interrupts import ignoring_stops
+from tfalda_sim.interrupts import INTERRUPTS, ignoring_stops, is_interrupt
 
 TRAIN_SEEDS: tuple[int, int] = (0, 1000)
 """Generated track seeds ``[low, high)`` the policy is trained on."""
@@ -185,7 +185,9 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
             t0 = time.perf_counter()
             try:
                 model.learn(timesteps, callback=CallbackList(callbacks))
-            except KeyboardInterrupt:
+            except INTERRUPTS as exc:
+                if not is_interrupt(exc):
+                    raise
                 interrupted = True  # keep the policy so far
                 shield.enter_context(ignoring_stops())
             finally:

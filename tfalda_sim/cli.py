@@ -17,7 +17,7 @@ import sys
 from collections.abc import Sequence
 
 from .cli_common import EXIT_BAD_INPUT, EXIT_NEGATIVE, CliError, interrupted
-from .interrupts import stop_signals_interrupt
+from .interrupts import is_interrupt, stop_signals_interrupt
 from .outputs import OutputError
 
 COMMAND_MODULES: tuple[str, ...] = ("tracks.command", "rendering.command", "evaluation.command",
@@ -74,6 +74,8 @@ def _run(argv: Sequence[str] | None) -> int:
               + (f": {exc.filename}" if exc.filename else ""), file=sys.stderr)
         return EXIT_BAD_INPUT
     except Exception as exc:  # a bug: one line, the traceback on demand
+        if is_interrupt(exc):  # a Ctrl-C that numba reported as a SystemError
+            return interrupted("nothing written")
         if os.environ.get("TFALDA_SIM_DEBUG"):
             raise
         print(f"internal error: {type(exc).__name__}: {exc} (set TFALDA_SIM_DEBUG=1 for the "

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar
 
-from .interrupts import ignoring_stops, last_stop_signal
+from .interrupts import INTERRUPTS, ignoring_stops, is_interrupt, last_stop_signal
 from .outputs import DIRECTORY, Output, OutputError
 from .outputs import check_outputs as _check_outputs
 from .parallel import WorkerDied, resolve_workers
@@ -237,7 +237,9 @@ def consume(results: Iterator[R], handle: Callable[[R], None]) -> SweepEnd:
     try:
         for result in results:
             handle(result)
-    except KeyboardInterrupt:
+    except INTERRUPTS as exc:
+        if not is_interrupt(exc):
+            raise
         end.interrupted = True
     except WorkerDied as exc:
         end.worker_died = str(exc)

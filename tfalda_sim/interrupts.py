@@ -76,3 +76,24 @@ def ignoring_stops() -> Iterator[None]:
     finally:
         for sig, handler in saved.items():
             signal.signal(sig, handler)
+
+
+INTERRUPTS = (KeyboardInterrupt, SystemError)
+"""What to catch for a Ctrl-C: numba's dispatcher reports a KeyboardInterrupt raised as
+a compiled kernel returns as a SystemError ("returned a result with an exception set")
+whose context is the interrupt. Catch these, then ask ``is_interrupt``."""
+
+
+def is_interrupt(exc: BaseException) -> bool:
+    """``exc`` is a Ctrl-C (or SIGTERM, SIGHUP): a KeyboardInterrupt, or a SystemError
+    caused by one."""
+    seen: BaseException | None = exc
+    for _ in range(8):  # a short chain; never loop on a cyclic one
+        if seen is None:
+            return False
+        if isinstance(seen, KeyboardInterrupt):
+            return True
+        if not isinstance(seen, SystemError):
+            return False
+        seen = seen.__cause__ or seen.__context__
+    return False

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from ..interrupts import ignoring_stops
+from ..interrupts import INTERRUPTS, ignoring_stops, is_interrupt
 from ..perception import DetectorConfig, LaneObservation, TfaldaDetector
 from ..rendering import FrameTruth, Renderer, build_scene, frame_truth
 from .metrics import EPSILON_PX, LANE_FAILURE_HIT_RATE, score_frame, truth_distance
@@ -121,7 +121,9 @@ def run_scenario(scenario: Scenario, configs: Mapping[str, DetectorConfig], *,
     try:
         for k in frames:
             _run_frame(k, scenario, renderer, scene, detectors, records, epsilon_px, on_frame)
-    except KeyboardInterrupt:
+    except INTERRUPTS as exc:
+        if not is_interrupt(exc):
+            raise
         with ignoring_stops():  # a second Ctrl-C must not lose the frames run so far
             done = min(len(r) for r in records.values())
             partial = None

@@ -28,7 +28,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..histogram import TimeHistogram
-from ..interrupts import ignoring_stops
+from ..interrupts import INTERRUPTS, ignoring_stops, is_interrupt
 from ..perception import (
     DetectorConfig,
     HoughConfig,
@@ -130,7 +130,9 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
                 writer.write(picture)
             bar.update()
         keep = True
-    except KeyboardInterrupt:
+    except INTERRUPTS as exc:
+        if not is_interrupt(exc):
+            raise
         stopped = "interrupted"
         keep = True
     finally:
