@@ -23,7 +23,7 @@ def _numba_style() -> SystemError:
         try:
             raise KeyboardInterrupt
         except KeyboardInterrupt:
-            raise SystemError("CPUDispatcher(...) returned a result with an exception set")
+            raise SystemError("CPUDispatcher(...) returned a result with an exception set")  # noqa: B904 (numba sets only the context)
     except SystemError as exc:
         return exc
 

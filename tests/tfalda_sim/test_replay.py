@@ -260,3 +260,9 @@ def test_the_seed_preset_is_the_seeds_numbers(video: Path) -> None:
     assert seed["hough_preset"] == "seed" and seed["frames"] == FRAMES
     # The synthetic lines are 250 DN: bright enough for the seed's 0.9 threshold too.
     assert seed["detections_per_frame"] >= 2
+
+
+def test_loops_equal_to_the_default_still_excludes_forever(video: Path, capsys) -> None:
+    """Found by the fuzz: argparse let `--loops=1 --forever` through (1 is the default)."""
+    assert main(["replay", str(video), "--detector", "hough", "--loops=1", "--forever"]) == 2
+    assert "not allowed with argument" in capsys.readouterr().err

@@ -31,7 +31,9 @@ def register(sub: Any) -> None:
     rp.add_argument("--detector", choices=[d.value for d in Detector], required=True,
                     help="the lane detector")
     times = rp.add_mutually_exclusive_group()
-    times.add_argument("--loops", type=positive_int_arg, default=1,
+    # default None, not 1: argparse lets an excluded option through when its value is the
+    # default's very object (`--loops=1 --forever` was accepted)
+    times.add_argument("--loops", type=positive_int_arg,
                        help="passes over the video (default 1)")
     times.add_argument("--forever", action="store_true", help="loop until Ctrl-C")
     rp.add_argument("--hough-preset", choices=[p.value for p in HoughPreset],
@@ -56,7 +58,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
                        "and --out F.mp4")
     try:
         result = replay(args.video, Detector(args.detector),
-                        loops=None if args.forever else args.loops, out=args.out,
+                        loops=None if args.forever else (args.loops or 1), out=args.out,
                         hough=HoughPreset(args.hough_preset), stages=args.stages,
                         progress=sys.stderr.isatty() or not args.json)
     except (FileNotFoundError, VideoError) as exc:
