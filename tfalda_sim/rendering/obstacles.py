@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 from numba import njit
 
-from ..camera import FisheyeCamera
+from ..camera import Camera, LensModel
 from .scene import Hall
 
 OBSTACLE_EDGE_STEPS: int = 12
@@ -58,7 +58,7 @@ _LIGHT_DIR = np.array([0.3, -0.5, 0.81]) / np.linalg.norm([0.3, -0.5, 0.81])
 def _project_faces(outlines: np.ndarray, normals: np.ndarray, mids: np.ndarray,
                    centres: np.ndarray, pose_x: float, pose_y: float, yaw: float,
                    mount_rot: np.ndarray, mount_pos: np.ndarray, K: np.ndarray,
-                   D: np.ndarray, max_distance_m: float, windows: np.ndarray
+                   D: np.ndarray, pinhole: bool, max_distance_m: float, windows: np.ndarray
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Image outlines ``(n, 5, P, 2)`` [px] of the box faces seen from a car at ``(pose_x,
     pose_y)`` [m] heading ``yaw`` [rad] by a camera with the mount's car → camera
@@ -83,7 +83,8 @@ def _project_faces(outlines: np.ndarray, normals: np.ndarray, mids: np.ndarray,
     bbox = np.zeros((n, n_faces, 4))
     keep = np.zeros((n, n_faces), np.bool_)
     dist = np.empty(n)
-    k1, k2, k3, k4 = D[0], D[1], D[2], D[3]
+    k1, k2, k3, k4 = D[0], D[1], D[2], D[3]  # pinhole: k1, k2, p1, p2 (and k3 = D[4])
+    pk3 = D[4] if pinhole else 0.0
     for b in range(n):
         d0 = centres[b, 0] - origin[0]
         d1 = centres[b, 1] - origin[1]
@@ -109,12 +110,19 @@ def _project_faces(outlines: np.ndarray, normals: np.ndarray, mids: np.ndarray,
                 if z <= 0.02:
                     ok = False
                     break
-                r = math.hypot(x, y)
-                theta = math.atan2(r, z)
-                t2 = theta * theta
-                theta_d = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
-                scale = theta_d / r if r > 1e-12 else 1.0 / z
-                xd, yd = x * scale, y * scale
+                if pinhole:
+                    xp, yp = x / z, y / z
+                    r2 = xp * xp + yp * yp
+                    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * pk3))
+                    xd = xp * radial + 2 * k3 * xp * yp + k4 * (r2 + 2 * xp * xp)
+                    yd = yp * radial + k3 * (r2 + 2 * yp * yp) + 2 * k4 * xp * yp
+                else:
+                    r = math.hypot(x, y)
+                    theta = math.atan2(r, z)
+                    t2 = theta * theta
+                    theta_d = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+                    scale = theta_d / r if r > 1e-12 else 1.0 / z
+                    xd, yd = x * scale, y * scale
                 u = K[0, 0] * (xd + K[0, 1] / K[0, 0] * yd) + K[0, 2]
                 v = K[1, 1] * yd + K[1, 2]
                 uv[b, f, p, 0] = u
@@ -139,7 +147,7 @@ _NO_WINDOWS = np.zeros((0, 4))
 _NO_FACES = (np.zeros((0, 4 * OBSTACLE_EDGE_STEPS, 2)), np.zeros((0, 4)), np.zeros(0))
 
 
-def visible_faces(camera: FisheyeCamera, faces: BoxFaces, pose: tuple[float, float, float],
+def visible_faces(camera: Camera, faces: BoxFaces, pose: tuple[float, float, float],
                   max_distance_m: float = Hall().distance_m,
                   windows: tuple[tuple[int, int, int, int], ...] | None = None
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -156,6 +164,7 @@ def visible_faces(camera: FisheyeCamera, faces: BoxFaces, pose: tuple[float, flo
                                           faces.centres, float(pose[0]), float(pose[1]),
                                           float(pose[2]), camera.mount._rotation,
                                           camera.mount._position, camera.K, camera.D,
+                                          camera.lens is LensModel.PINHOLE,
                                           float(max_distance_m), win)
     if not keep.any():
         return _NO_FACES
@@ -165,7 +174,7 @@ def visible_faces(camera: FisheyeCamera, faces: BoxFaces, pose: tuple[float, flo
     return uv[box_i, face_i], bbox[box_i, face_i], faces.shading[box_i, face_i]
 
 
-def obstacle_faces(camera: FisheyeCamera, faces: BoxFaces, pose: tuple[float, float, float],
+def obstacle_faces(camera: Camera, faces: BoxFaces, pose: tuple[float, float, float],
                    white_dn: float = 255.0, max_distance_m: float = Hall().distance_m
                    ) -> list[tuple[np.ndarray, float]]:
     """``visible_faces`` as a list of image polygons [px] with their grey level [DN] for a

@@ -8,22 +8,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera import FisheyeCamera
+from ..camera import Bonnet, Camera
 
-
-@dataclass(frozen=True)
-class Bonnet:
-    """The car's bonnet in the bottom rows: its edge is at ``top_row`` [px] in the image
-    middle and ``edge_drop_px`` lower at the left and right borders (a parabola)."""
-
-    top_row: float = 440.0
-    edge_drop_px: float = 22.0
-    enabled: bool = True
-
-    def edge(self, u: np.ndarray, width: int) -> np.ndarray:
-        """Row of the bonnet edge [px] at columns ``u``."""
-        t = (np.asarray(u, dtype=np.float64) - (width - 1) / 2) / ((width - 1) / 2)
-        return self.top_row + self.edge_drop_px * t * t
+__all__ = ["Bonnet", "PixelGeometry", "pixel_geometry"]
 
 
 @dataclass(frozen=True)
@@ -42,9 +29,10 @@ class PixelGeometry:
     bonnet: np.ndarray  # uint8: 1 on the bonnet
 
 
-def pixel_geometry(camera: FisheyeCamera, bonnet: Bonnet | None = None) -> PixelGeometry:
-    """Compute the per-pixel constants of ``camera`` (once per camera and bonnet)."""
-    bonnet = bonnet or Bonnet()
+def pixel_geometry(camera: Camera, bonnet: Bonnet | None = None) -> PixelGeometry:
+    """Compute the per-pixel constants of ``camera`` (once per camera and bonnet; the
+    camera's own bonnet unless ``bonnet`` is given)."""
+    bonnet = bonnet or camera.bonnet
     h, w = camera.height, camera.width
     pos = camera.mount.position()
     rot = camera.mount.rotation()
@@ -56,8 +44,9 @@ def pixel_geometry(camera: FisheyeCamera, bonnet: Bonnet | None = None) -> Pixel
         return rays, pos[0] + t * rays[:, 0], pos[1] + t * rays[:, 1]
 
     v, u = np.mgrid[0:h, 0:w].astype(np.float64)
-    on_bonnet = (v >= bonnet.edge(u, w)) if bonnet.enabled else np.zeros_like(v, dtype=bool)
-    v_geo = np.where(on_bonnet, 2.0 * bonnet.edge(u, w) - v, v)  # mirrored about the edge
+    edge = bonnet.edge(u, w, h)
+    on_bonnet = v >= edge
+    v_geo = np.where(on_bonnet, 2.0 * np.where(on_bonnet, edge, 0.0) - v, v)  # mirrored
     rays, gx, gy = ground(u, v_geo)
     horiz = np.hypot(rays[:, 0], rays[:, 1])
     rho = np.hypot(gx - pos[0], gy - pos[1])

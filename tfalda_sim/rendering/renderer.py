@@ -26,7 +26,7 @@ import cv2
 import numpy as np
 from numba import njit
 
-from ..camera import FisheyeCamera
+from ..camera import Camera, FisheyeCamera
 from .effects import Effects
 from .obstacles import BoxFaces, draw_faces, visible_faces
 from .pixels import Bonnet, pixel_geometry
@@ -350,9 +350,9 @@ class Renderer:
     only the requested ``(x, y, width, height)`` windows [px], identical to crops of it.
     """
 
-    def __init__(self, camera: FisheyeCamera | None = None, bonnet: Bonnet | None = None) -> None:
+    def __init__(self, camera: Camera | None = None, bonnet: Bonnet | None = None) -> None:
         self.camera = camera or FisheyeCamera.default()
-        self.bonnet = bonnet or Bonnet()
+        self.bonnet = bonnet or self.camera.bonnet
         self.geometry = pixel_geometry(self.camera, self.bonnet)
         # Caches. Only the current scene is held (a new scene per episode must not pile
         # up atlases); layouts and window packings are keyed by value and bounded.

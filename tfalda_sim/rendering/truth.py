@@ -19,9 +19,8 @@ from tfalda_sim.tracks import Marking, Track
 from tfalda_sim.tracks.dimensions import LINE_WIDTH_M, START_LINE_WIDTH_M, STOP_LINE_WIDTH_M
 from tfalda_sim.tracks.rules import obstacle_corners
 
-from ..camera import FisheyeCamera
+from ..camera import Bonnet, Camera
 from .obstacles import BoxFaces, obstacle_faces
-from .pixels import Bonnet
 
 TRUTH_STEP_M: float = 0.02
 """Arc-length step [m] of the polylines the markings are drawn from."""
@@ -91,10 +90,11 @@ def _cross_band(track: Track, s_lo: float, s_hi: float, d_lo: float, d_hi: float
     return pts
 
 
-def frame_truth(track: Track, camera: FisheyeCamera, pose: tuple[float, float, float], *,
+def frame_truth(track: Track, camera: Camera, pose: tuple[float, float, float], *,
                 bonnet: Bonnet | None = None, s_hint_m: float | None = None) -> FrameTruth:
-    """Ground truth for a car at ``pose = (x [m], y [m], yaw [rad])`` on ``track``."""
-    bonnet = bonnet or Bonnet()
+    """Ground truth for a car at ``pose = (x [m], y [m], yaw [rad])`` on ``track`` (the
+    camera's own bonnet unless ``bonnet`` is given)."""
+    bonnet = bonnet or camera.bonnet
     h, w = camera.height, camera.width
     labels = np.zeros((h, w), np.uint8)
     x, y, yaw = pose
@@ -151,14 +151,14 @@ def frame_truth(track: Track, camera: FisheyeCamera, pose: tuple[float, float, f
     for uv, _ in obstacle_faces(camera, BoxFaces.of(boxes), pose):
         cv2.fillPoly(labels, [np.rint(uv * 16).astype(np.int32)], int(Marking.OBSTACLE),
                      lineType=cv2.LINE_8, shift=4)
-    edge_row = bonnet.edge(np.arange(w), w) if bonnet.enabled else np.full(w, np.inf)
+    edge_row = bonnet.edge(np.arange(w), w, h)
     if bonnet.enabled:
         labels[np.arange(h)[:, None] >= edge_row[None, :]] = 0
     left, right = _ego_boundaries(track, camera, pose, edge_row, s_hint_m)
     return FrameTruth(labels, left, right)
 
 
-def _ego_boundaries(track: Track, camera: FisheyeCamera, pose: tuple[float, float, float],
+def _ego_boundaries(track: Track, camera: Camera, pose: tuple[float, float, float],
                     edge_row: np.ndarray, s_hint_m: float | None) -> tuple[np.ndarray, np.ndarray]:
     x, y, yaw = pose
     cam_x = x + math.cos(yaw) * camera.mount.forward_m

@@ -1,4 +1,5 @@
-"""The fisheye camera: OpenCV agreement, inversion, mounting, calibration to the thesis."""
+"""The lens models (fisheye, pinhole): OpenCV agreement, inversion, mounting, the checks of
+impossible values, calibration to the thesis."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tfalda_sim.camera import FisheyeCamera
+from tfalda_sim.camera import Bonnet, CameraMount, FisheyeCamera, PinholeCamera
 
 THESIS_ROIS = {  # table 2.4: (x, y, width, height) [px]
     "upper_left": (195, 260, 150, 75), "upper_right": (365, 260, 150, 75),
@@ -130,3 +131,81 @@ def test_mount_pitch_moves_the_horizon() -> None:
     level = cam.with_mount(pitch_rad=0.0)
     assert level.project(level.car_to_camera(far))[0, 1] == pytest.approx(cam.K[1, 2], abs=0.5)
     assert cam.project(cam.car_to_camera(far))[0, 1] < cam.K[1, 2] - 20  # tilted down
+
+
+# ----------------------------------------------------------------------------- pinhole
+PINHOLE_K = np.array([[420.0, 0.0, 371.2], [0.0, 418.5, 243.9], [0.0, 0.0, 1.0]])
+
+
+@pytest.mark.parametrize("D", [np.zeros(5), np.array([-0.28, 0.09, 0.0012, -0.0008, -0.012])])
+def test_pinhole_project_agrees_with_opencv(D: np.ndarray) -> None:
+    cam = PinholeCamera(PINHOLE_K, D)
+    rng = np.random.default_rng(3)
+    theta = rng.uniform(0.0, math.radians(45.0), 10_000)  # a 90° lens's view
+    phi = rng.uniform(-math.pi, math.pi, 10_000)
+    pts = np.column_stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi),
+                           np.cos(theta)]) * rng.uniform(0.05, 20.0, 10_000)[:, None]
+    ref, _ = cv2.projectPoints(pts.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.K, cam.D)
+    assert np.max(np.abs(cam.project(pts) - ref.reshape(-1, 2))) < 0.01
+
+
+def test_pinhole_behind_is_nan_and_unproject_inverts() -> None:
+    cam = PinholeCamera(PINHOLE_K, np.array([-0.28, 0.09, 0.0012, -0.0008, -0.012]))
+    uv = cam.project(np.array([[0.1, 0.0, -1.0], [0.0, 0.0, 0.0], [0.2, 0.1, 1.0]]))
+    assert np.isnan(uv[:2]).all() and np.isfinite(uv[2]).all()
+    pix = np.random.default_rng(4).uniform([0, 0], [751, 479], (4000, 2))
+    rays = cam.unproject(pix)
+    assert np.allclose(np.linalg.norm(rays, axis=1), 1.0) and (rays[:, 2] > 0).all()
+    assert np.max(np.abs(cam.project(rays) - pix)) < 1e-6
+
+
+def test_pinhole_refuses_skew_and_wrong_distortion() -> None:
+    skewed = PINHOLE_K.copy()
+    skewed[0, 1] = 0.5
+    with pytest.raises(ValueError, match="skew"):
+        PinholeCamera(skewed, np.zeros(5))
+    with pytest.raises(ValueError, match=r"D must have shape \(5,\)"):
+        PinholeCamera(PINHOLE_K, np.zeros(4))
+
+
+@pytest.mark.parametrize("lens", [FisheyeCamera, PinholeCamera])
+def test_pixels_to_ground_inverts_project_world(lens: type) -> None:
+    """Both models: a ground point projected and taken back lands where it was."""
+    if lens is FisheyeCamera:
+        cam = FisheyeCamera.default()
+    else:
+        cam = PinholeCamera(PINHOLE_K, np.array([-0.2, 0.05, 0.001, 0.0, 0.0]),
+                            mount=CameraMount(height_m=0.12, pitch_rad=math.radians(12.0),
+                                              roll_rad=0.02, yaw_rad=-0.03, lateral_m=0.01))
+    rng = np.random.default_rng(5)
+    ground = np.column_stack([rng.uniform(0.6, 3.0, 200), rng.uniform(-0.4, 0.4, 200),
+                              np.zeros(200)])
+    uv = cam.project(cam.car_to_camera(ground))
+    ok = np.all(np.isfinite(uv), axis=1)
+    assert ok.sum() > 150
+    assert np.allclose(cam.pixels_to_ground(uv[ok]), ground[ok, :2], atol=1e-6)
+
+
+@pytest.mark.parametrize("field,value,match", [
+    ("height_m", -0.1, "height_m must be in"), ("height_m", 5.0, "height_m must be in"),
+    ("pitch_rad", math.radians(95.0), "pitch_rad must lie within"),
+    ("roll_rad", float("nan"), "roll_rad must be finite"),
+    ("yaw_rad", "0.1", "yaw_rad must be a number"),
+])
+def test_impossible_mounts_are_refused(field: str, value: object, match: str) -> None:
+    with pytest.raises((ValueError, TypeError), match=match):
+        CameraMount(**{field: value})
+
+
+def test_camera_refuses_impossible_intrinsics() -> None:
+    K = FisheyeCamera.default().K
+    with pytest.raises(ValueError, match="positive focal"):
+        FisheyeCamera(np.diag([-1.0, 1.0, 1.0]), np.zeros(4))
+    with pytest.raises(ValueError, match="image width must be in"):
+        FisheyeCamera(K, np.zeros(4), width=0)
+    with pytest.raises(ValueError, match="principal point"):
+        FisheyeCamera(K, np.zeros(4), width=64, height=48)
+    with pytest.raises(ValueError, match="frame_rate_hz"):
+        FisheyeCamera(K, np.zeros(4), frame_rate_hz=0.0)
+    with pytest.raises(ValueError, match="outside the 752×480 image"):
+        FisheyeCamera(K, np.zeros(4), bonnet=Bonnet.polygon([[0, 400], [800, 400], [0, 479]]))

@@ -1,0 +1,212 @@
+"""Camera profiles: exact round trips, the named profiles, OpenCV and ROS calibration files,
+and bad files refused naming the field."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from tfalda_sim.camera import (
+    NAMED_CAMERAS,
+    Bonnet,
+    CameraFileError,
+    CameraMount,
+    FisheyeCamera,
+    LensModel,
+    PinholeCamera,
+    load_camera,
+    load_intrinsics,
+    save_camera,
+)
+from tfalda_sim.camera.profile import profile_dict
+
+DATA = Path(__file__).parents[2] / "data" / "cameras"
+MOUNT = CameraMount(height_m=0.113, forward_m=0.31, lateral_m=-0.012, pitch_rad=0.1234567,
+                    roll_rad=-0.0123, yaw_rad=0.0345)
+
+
+def same_camera(a: object, b: object) -> bool:
+    return (type(a) is type(b) and np.array_equal(a.K, b.K) and np.array_equal(a.D, b.D)
+            and (a.width, a.height, a.frame_rate_hz) == (b.width, b.height, b.frame_rate_hz)
+            and a.mount == b.mount and a.bonnet.enabled == b.bonnet.enabled
+            and (a.bonnet.top_row, a.bonnet.edge_drop_px) == (b.bonnet.top_row,
+                                                              b.bonnet.edge_drop_px)
+            and ((a.bonnet.polygon_px is None and b.bonnet.polygon_px is None)
+                 or np.array_equal(a.bonnet.polygon_px, b.bonnet.polygon_px)))
+
+
+CAMERAS = {
+    "thesis": FisheyeCamera.default(),
+    "fisheye-polygon": FisheyeCamera(
+        np.array([[251.123456789, 0.31, 380.7], [0.0, 250.987654321, 236.1], [0, 0, 1]]),
+        np.array([0.0213, -0.0087, 0.0031, -0.0006]), mount=MOUNT,
+        bonnet=Bonnet.polygon([[0, 479], [0, 410.5], [376.25, 398], [751, 412], [751, 479]]),
+        frame_rate_hz=30.0),
+    "pinhole-none": PinholeCamera(
+        np.array([[421.3, 0.0, 372.1], [0.0, 420.8, 241.6], [0.0, 0.0, 1.0]]),
+        np.array([-0.281, 0.0862, 0.00091, -0.00043, -0.0119]), width=640, height=400,
+        mount=MOUNT, bonnet=Bonnet.none()),
+}
+
+
+@pytest.mark.parametrize("name", list(CAMERAS))
+def test_profiles_round_trip_exactly(tmp_path: Path, name: str) -> None:
+    cam = CAMERAS[name]
+    path = save_camera(cam, tmp_path / "cam.yaml", description="a test camera")
+    back = load_camera(path)
+    assert same_camera(cam, back)
+    # and the file of the loaded camera is the same text
+    assert save_camera(back, tmp_path / "again.yaml", "a test camera").read_text() == \
+        path.read_text()
+
+
+def test_named_profiles() -> None:
+    assert set(NAMED_CAMERAS) == {"thesis", "reference-car"}
+    assert same_camera(load_camera("thesis"), FisheyeCamera.default())
+    cam = FisheyeCamera.default()
+    assert load_camera(cam) is cam
+
+
+def test_hand_written_profile_in_degrees(tmp_path: Path) -> None:
+    data = profile_dict(CAMERAS["thesis"])
+    m = data["mount"]
+    for angle in ("pitch", "roll", "yaw"):
+        m[f"{angle}_deg"] = math.degrees(m.pop(f"{angle}_rad"))
+    m["pitch_deg"] = 5.5
+    (tmp_path / "deg.yaml").write_text(yaml.safe_dump(data))
+    cam = load_camera(tmp_path / "deg.yaml")
+    assert cam.mount.pitch_rad == pytest.approx(math.radians(5.5), abs=1e-15)
+
+
+def test_opencv_filestorage_yaml_and_xml(tmp_path: Path) -> None:
+    """Files written by cv2.FileStorage as OpenCV's calibration sample does, after
+    cv2.calibrateCamera (5 coefficients) and cv2.fisheye.calibrate (4, shape (4, 1))."""
+    pin, fish = CAMERAS["pinhole-none"], CAMERAS["fisheye-polygon"]
+    for suffix in (".yaml", ".xml"):
+        for cam, D in ((pin, pin.D.reshape(1, 5)), (fish, fish.D.reshape(4, 1))):
+            path = tmp_path / f"{cam.lens.value}{suffix}"
+            fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+            fs.write("calibration_time", "Tue Dec  1 12:00:00 2026")
+            fs.write("image_width", cam.width)
+            fs.write("image_height", cam.height)
+            fs.write("camera_matrix", cam.K)
+            fs.write("distortion_coefficients", D)
+            fs.write("avg_reprojection_error", 0.21)
+            fs.release()
+            intr = load_intrinsics(path)
+            assert intr.lens is cam.lens and (intr.width, intr.height) == (cam.width, cam.height)
+            assert np.array_equal(intr.K, cam.K) and np.array_equal(intr.D, cam.D)
+            with pytest.raises(CameraFileError, match="carries no mount"):
+                load_camera(path)
+            placed = load_camera(path, mount=MOUNT)
+            assert placed.mount == MOUNT and not placed.bonnet.enabled
+            assert np.allclose(placed.project(np.array([[0.1, 0.05, 1.0]])),
+                               cam.project(np.array([[0.1, 0.05, 1.0]])))
+    # Four coefficients forced to the pinhole model: (k1, k2, p1, p2), k3 = 0.
+    fs = cv2.FileStorage(str(tmp_path / "four.yaml"), cv2.FILE_STORAGE_WRITE)
+    fs.write("image_width", pin.width)
+    fs.write("image_height", pin.height)
+    fs.write("camera_matrix", pin.K)
+    fs.write("distortion_coefficients", pin.D[:4].reshape(1, 4))
+    fs.release()
+    assert load_intrinsics(tmp_path / "four.yaml").lens is LensModel.FISHEYE
+    four = load_intrinsics(tmp_path / "four.yaml", lens=LensModel.PINHOLE)
+    assert four.lens is LensModel.PINHOLE and np.array_equal(four.D, [*pin.D[:4], 0.0])
+
+
+@pytest.mark.parametrize("name,lens", [("ros-plumb-bob.yaml", LensModel.PINHOLE),
+                                       ("ros-equidistant.yaml", LensModel.FISHEYE)])
+def test_ros_camera_info(name: str, lens: LensModel) -> None:
+    intr = load_intrinsics(DATA / name)
+    raw = yaml.safe_load((DATA / name).read_text())
+    assert intr.lens is lens and (intr.width, intr.height) == (752, 480)
+    assert np.array_equal(intr.K.ravel(), raw["camera_matrix"]["data"])
+    assert np.array_equal(intr.D, raw["distortion_coefficients"]["data"])
+    cam = load_camera(DATA / name, mount=MOUNT)
+    assert cam.lens is lens
+
+
+def _profile(tmp_path: Path, **changes: object) -> Path:
+    data = profile_dict(CAMERAS["fisheye-polygon"])
+    for key, value in changes.items():
+        target, *rest = key.split("__")
+        if rest:
+            if value is None:
+                data[target].pop(rest[0])
+            else:
+                data[target][rest[0]] = value
+        elif value is None:
+            data.pop(target)
+        else:
+            data[target] = value
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+@pytest.mark.parametrize("changes,match", [
+    ({"colour": "grey"}, "unknown key 'colour' in the profile"),
+    ({"mount__tilt_deg": 3.0}, "unknown key 'tilt_deg' in mount"),
+    ({"mount__height_m": None}, r"mount.height_m is missing"),
+    ({"mount__pitch_deg": 5.0}, "both pitch_rad and pitch_deg"),
+    ({"mount__height_m": -0.2}, "height_m must be in"),
+    ({"mount__pitch_rad": 2.0}, "pitch_rad must lie within"),
+    ({"lens": "kannala"}, "lens must be one of fisheye, pinhole"),
+    ({"distortion": [0.1, 0.2]}, r"distortion of a fisheye lens must be a list of 4 numbers"),
+    ({"camera_matrix": [[1, 0], [0, 1]]}, "camera_matrix must be a list of 3 rows"),
+    ({"camera_matrix": [[-250.0, 0, 376], [0, 250, 240], [0, 0, 1]]}, "positive focal"),
+    ({"image_width_px": 752.5}, "image_width_px must be an integer"),
+    ({"image_width_px": 200}, "outside the 200×480 image"),
+    ({"frame_rate_hz": -1.0}, "frame_rate_hz must be in"),
+    ({"frame_rate_hz": ".nan"}, "frame_rate_hz must be a number"),
+    ({"bonnet": {"circle": 3}}, "bonnet must be one of"),
+    ({"bonnet": {"polygon_px": [[1, 2], [3, 4]]}}, "needs 3–1000 vertices"),
+    ({"bonnet": {"none": False}}, "bonnet.none must be true"),
+    ({"bonnet": {"parabola": {"top_row_px": 440}}}, "edge_drop_px is missing"),
+    ({"format": "tfalda-sim-camera/9"}, "is not 'tfalda-sim-camera/1'"),
+    ({"frame_rate_hz": None}, "frame_rate_hz is missing"),
+])
+def test_bad_profiles_are_refused_naming_the_field(tmp_path: Path, changes: dict,
+                                                   match: str) -> None:
+    with pytest.raises(CameraFileError, match=match):
+        load_camera(_profile(tmp_path, **changes))
+
+
+def test_nan_in_the_file(tmp_path: Path) -> None:
+    path = _profile(tmp_path)
+    path.write_text(path.read_text().replace("frame_rate_hz: 30.0", "frame_rate_hz: .nan"))
+    with pytest.raises(CameraFileError, match="frame_rate_hz must be finite"):
+        load_camera(path)
+
+
+@pytest.mark.parametrize("content,match", [
+    (b"format: tfalda-sim-camera/1\nlens: [unclosed\n", r"not valid YAML \(line"),
+    (b"format: a\nformat: b\n", "key 'format' is given twice"),
+    (b"\xff\xfe\x00binary", "not a text file"),
+    (b"- 1\n- 2\n", "not a camera file"),
+    (b"width: 752\n", "neither 'format: tfalda-sim-camera/1'"),
+    (b"%YAML:1.0\n---\nimage_width: 752\n", "no camera_matrix"),
+    (b"image_width: 752\nimage_height: 480\ndistortion_model: rational_polynomial\n",
+     "distortion_model 'rational_polynomial' is not supported"),
+])
+def test_corrupt_and_foreign_files(tmp_path: Path, content: bytes, match: str) -> None:
+    path = tmp_path / "cam.yaml"
+    path.write_bytes(content)
+    with pytest.raises(CameraFileError, match=match):
+        load_camera(path, mount=MOUNT)
+
+
+def test_missing_file_unknown_name_and_folder(tmp_path: Path) -> None:
+    with pytest.raises(CameraFileError, match="unknown camera 'sony'.*thesis, reference-car"):
+        load_camera("sony")
+    with pytest.raises(CameraFileError, match="no such file"):
+        load_camera(tmp_path / "nothing.yaml")
+    with pytest.raises(CameraFileError, match="is a folder"):
+        load_camera(tmp_path)
+    with pytest.raises(TypeError, match="profile name, a path or a Camera"):
+        load_camera(3)  # type: ignore[arg-type]

@@ -1,0 +1,299 @@
+"""Camera lens models: OpenCV's fisheye (Kannala–Brandt) and its standard pinhole model
+with radial-tangential distortion, each with its mount on the car and the car's body in
+view.
+
+Frames:
+- **camera** (OpenCV): x right, y down, z forward [m].
+- **car**: x forward, y left, z up [m]; origin on the ground below the rear axle centre.
+- **world**: the track's frame, x/y on the mat, z up [m].
+
+Fisheye (identical to ``cv2.fisheye.projectPoints``): for a camera-frame point,
+θ = angle from the optical axis, θ_d = θ·(1 + k1θ² + k2θ⁴ + k3θ⁶ + k4θ⁸), and the pixel is
+``K · (θ_d · (x, y)/‖(x, y)‖, 1)``. With D = 0 this is the equidistant fisheye r = f·θ.
+A real calibration (``K``, ``D`` from ``cv2.fisheye.calibrate``) plugs in unchanged; its
+skew is ``K[0, 1] = α·fx`` (pass ``alpha=K[0, 1] / K[0, 0]`` to
+``cv2.fisheye.projectPoints``, which reads only fx, fy, cx, cy from ``K``).
+
+Pinhole (identical to ``cv2.projectPoints``, OpenCV's 5-coefficient model, ROS'
+``plumb_bob``): x' = x/z, y' = y/z, r² = x'² + y'²,
+x'' = x'(1 + k1r² + k2r⁴ + k3r⁶) + 2p1x'y' + p2(r² + 2x'²),
+y'' = y'(1 + k1r² + k2r⁴ + k3r⁶) + p1(r² + 2y'²) + 2p2x'y', pixel ``K · (x'', y'', 1)``
+(``K[0, 1]`` must be 0: OpenCV's calibration never estimates a pinhole skew).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from enum import Enum
+
+import cv2
+import numpy as np
+
+from .bonnet import Bonnet
+from .mount import (
+    DEFAULT_HFOV_RAD,
+    FRAME_RATE_HZ,
+    SENSOR_HEIGHT_PX,
+    SENSOR_WIDTH_PX,
+    CameraMount,
+)
+
+MAX_IMAGE_SIDE_PX: int = 8192
+"""Largest image width or height accepted [px] (per-pixel tables are built per camera)."""
+
+MAX_FRAME_RATE_HZ: float = 1000.0
+"""Highest frame rate accepted [1/s]."""
+
+PINHOLE_MIN_Z_M: float = 1e-6
+"""A pinhole camera sees points at least this far in front of its centre [m]; nearer or
+behind project to NaN."""
+
+
+class LensModel(Enum):
+    """The distortion model of a camera's intrinsics."""
+
+    FISHEYE = "fisheye"
+    """OpenCV's ``cv2.fisheye`` (Kannala–Brandt k1..k4); ROS ``equidistant``."""
+    PINHOLE = "pinhole"
+    """OpenCV's standard model (k1, k2, p1, p2, k3); ROS ``plumb_bob``."""
+
+
+def _check_matrix(name: str, value: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.size != int(np.prod(shape)):
+        raise ValueError(f"{name} must have shape {shape}, got {arr.shape}")
+    arr = arr.reshape(shape).copy()
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite")
+    return arr
+
+
+@dataclass(frozen=True, eq=False)  # array fields: identity equality, hashable
+class Camera:
+    """A calibrated camera on the car: intrinsics ``K`` (3×3) and distortion ``D``, the
+    image size [px], the mount, the car's body in the image (``bonnet``) and the frame
+    rate [1/s]. Use ``FisheyeCamera`` or ``PinholeCamera``; ``tfalda_sim.camera.
+    load_camera`` reads either from a profile file."""
+
+    K: np.ndarray
+    D: np.ndarray
+    width: int = SENSOR_WIDTH_PX
+    height: int = SENSOR_HEIGHT_PX
+    mount: CameraMount = field(default_factory=CameraMount)
+    bonnet: Bonnet = field(default_factory=Bonnet)
+    frame_rate_hz: float = FRAME_RATE_HZ
+
+    lens: LensModel = field(init=False, repr=False, default=LensModel.FISHEYE)
+    n_distortion: int = field(init=False, repr=False, default=4)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "K", _check_matrix("K", self.K, (3, 3)))
+        object.__setattr__(self, "D", _check_matrix("D", self.D, (self.n_distortion,)))
+        self.K.setflags(write=False)
+        self.D.setflags(write=False)
+        if not (self.K[0, 0] > 0 and self.K[1, 1] > 0):
+            raise ValueError("K must have positive focal lengths fx = K[0, 0] and fy = K[1, 1] "
+                             f"[px], got {self.K[0, 0]:g}, {self.K[1, 1]:g}")
+        if not np.array_equal(self.K[2], [0.0, 0.0, 1.0]) or self.K[1, 0] != 0:
+            raise ValueError("K must be upper triangular with last row [0, 0, 1], got "
+                             f"{self.K.tolist()}")
+        for name in ("width", "height"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise TypeError(f"image {name} must be an integer [px], got {value!r}")
+            if not 16 <= value <= MAX_IMAGE_SIDE_PX:
+                raise ValueError(f"image {name} must be in [16, {MAX_IMAGE_SIDE_PX}] px, got "
+                                 f"{value}")
+        if not (-self.width <= self.K[0, 2] <= 2 * self.width
+                and -self.height <= self.K[1, 2] <= 2 * self.height):
+            raise ValueError(f"principal point ({self.K[0, 2]:g}, {self.K[1, 2]:g}) px is far "
+                             f"outside the {self.width}×{self.height} image: K for another size?")
+        if not isinstance(self.mount, CameraMount):
+            raise TypeError(f"mount must be a CameraMount, got {type(self.mount).__name__}")
+        if not isinstance(self.bonnet, Bonnet):
+            raise TypeError(f"bonnet must be a Bonnet, got {type(self.bonnet).__name__}")
+        self.bonnet.check_inside(self.width, self.height)
+        if not 0.0 < self.frame_rate_hz <= MAX_FRAME_RATE_HZ:
+            raise ValueError(f"frame_rate_hz must be in (0, {MAX_FRAME_RATE_HZ:g}], got "
+                             f"{self.frame_rate_hz}")
+
+    def with_mount(self, **changes: float) -> Camera:
+        """The same lens on a changed mount, e.g. ``cam.with_mount(height_m=0.15)``."""
+        return replace(self, mount=replace(self.mount, **changes))
+
+    def replace(self, **changes: object) -> Camera:
+        """A copy with fields changed (``mount``, ``bonnet``, ``K``, …)."""
+        return replace(self, **changes)
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """``(N, 3)`` camera-frame points [m] → ``(N, 2)`` pixels (u, v); NaN where the
+        lens does not see a point."""
+        raise NotImplementedError
+
+    def unproject(self, pixels: np.ndarray) -> np.ndarray:
+        """``(N, 2)`` pixels → ``(N, 3)`` unit rays in the camera frame."""
+        raise NotImplementedError
+
+    # ---------------------------------------------------------------- frames
+    def car_to_camera(self, points_car: np.ndarray) -> np.ndarray:
+        """``(N, 3)`` car-frame points [m] → camera frame [m]."""
+        p = np.asarray(points_car, dtype=np.float64)
+        return (p - self.mount._position) @ self.mount._rotation.T
+
+    def world_to_camera(self, points_world: np.ndarray, car_pose: tuple[float, float, float]
+                        ) -> np.ndarray:
+        """``(N, 3)`` world points [m] seen from a car at ``(x [m], y [m], yaw [rad])``."""
+        x, y, yaw = car_pose
+        p = np.asarray(points_world, dtype=np.float64)
+        c, s = math.cos(yaw), math.sin(yaw)
+        # World → car (rotate by −yaw about the car) → camera, as one affine map.
+        world_to_car = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        rot = self.mount._rotation @ world_to_car
+        origin = np.array([x, y, 0.0]) + world_to_car.T @ self.mount._position
+        return (p - origin) @ rot.T
+
+    def project_world(self, points_world: np.ndarray, car_pose: tuple[float, float, float]
+                      ) -> np.ndarray:
+        """World points [m] → pixels, for a car at ``car_pose``; NaN behind the lens."""
+        return self.project(self.world_to_camera(points_world, car_pose))
+
+    def pixels_to_ground(self, pixels: np.ndarray) -> np.ndarray:
+        """``(N, 2)`` pixels → the ``(N, 2)`` points (x forward, y left) [m] of the flat
+        ground they see, in the car frame; NaN where the ray does not reach the ground."""
+        rays = self.unproject(pixels) @ self.mount._rotation
+        pos = self.mount._position
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(rays[:, 2] < -1e-9, -pos[2] / rays[:, 2], np.nan)
+        return np.column_stack([pos[0] + t * rays[:, 0], pos[1] + t * rays[:, 1]])
+
+    def pixel_rays_car(self) -> np.ndarray:
+        """Unit ray of every pixel centre in the car frame, ``(height, width, 3)``."""
+        v, u = np.mgrid[0:self.height, 0:self.width].astype(np.float64)
+        rays = self.unproject(np.column_stack([u.ravel(), v.ravel()]))
+        return (rays @ self.mount.rotation()).reshape(self.height, self.width, 3)
+
+
+@dataclass(frozen=True, eq=False)
+class FisheyeCamera(Camera):
+    """A Kannala–Brandt fisheye camera (``cv2.fisheye``): ``D`` = (k1, k2, k3, k4)."""
+
+    @classmethod
+    def default(cls, mount: CameraMount | None = None) -> FisheyeCamera:
+        """752×480 equidistant fisheye with a 157.5° horizontal field of view, looking
+        ahead and tilted 5.5° down, mounted 0.20 m high: calibrated to the thesis."""
+        f = (SENSOR_WIDTH_PX / 2) / (DEFAULT_HFOV_RAD / 2)
+        K = np.array([[f, 0.0, (SENSOR_WIDTH_PX - 1) / 2],
+                      [0.0, f, (SENSOR_HEIGHT_PX - 1) / 2],
+                      [0.0, 0.0, 1.0]])
+        return cls(K, np.zeros(4), mount=mount or CameraMount())
+
+    # ---------------------------------------------------------------- projection
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """``(N, 3)`` camera-frame points [m] → ``(N, 2)`` pixels (u, v); NaN where a
+        point is behind the lens (z ≤ 0)."""
+        p = np.asarray(points, dtype=np.float64)
+        if p.ndim != 2 or p.shape[1] != 3:
+            raise ValueError(f"project expects an (N, 3) array of points, got {p.shape}")
+        x, y, z = p[:, 0], p[:, 1], p[:, 2]
+        r = np.hypot(x, y)
+        theta = np.arctan2(r, z)
+        t2 = theta * theta
+        k1, k2, k3, k4 = self.D
+        theta_d = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            scale = np.where(r > 1e-12, theta_d / np.where(r > 1e-12, r, 1.0), 1.0 / np.where(
+                z > 0, z, 1.0))
+        xd, yd = x * scale, y * scale
+        K = self.K
+        uv = np.column_stack([K[0, 0] * (xd + K[0, 1] / K[0, 0] * yd) + K[0, 2],
+                              K[1, 1] * yd + K[1, 2]])
+        uv[z <= 0] = np.nan
+        return uv
+
+    def unproject(self, pixels: np.ndarray) -> np.ndarray:
+        """``(N, 2)`` pixels → ``(N, 3)`` unit rays in the camera frame (inverse of
+        ``project``; θ is recovered by Newton's method)."""
+        uv = np.asarray(pixels, dtype=np.float64)
+        if uv.ndim != 2 or uv.shape[1] != 2:
+            raise ValueError(f"unproject expects an (N, 2) array of pixels, got {uv.shape}")
+        K = self.K
+        yd = (uv[:, 1] - K[1, 2]) / K[1, 1]
+        xd = (uv[:, 0] - K[0, 2] - K[0, 1] * yd) / K[0, 0]
+        theta_d = np.hypot(xd, yd)
+        k1, k2, k3, k4 = self.D
+        theta = theta_d.copy()
+        for _ in range(20):
+            t2 = theta * theta
+            f = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)))) - theta_d
+            df = 1 + t2 * (3 * k1 + t2 * (5 * k2 + t2 * (7 * k3 + t2 * 9 * k4)))
+            theta = theta - f / df
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s = np.where(theta_d > 1e-12, np.sin(theta) / np.where(theta_d > 1e-12, theta_d, 1), 1)
+        return np.column_stack([xd * s, yd * s, np.cos(theta)])
+
+
+@dataclass(frozen=True, eq=False)
+class PinholeCamera(Camera):
+    """OpenCV's standard camera model (``cv2.projectPoints``): ``D`` = (k1, k2, p1, p2,
+    k3). A 4-entry ``D`` from a calibration is (k1, k2, p1, p2) with k3 = 0: pass it as
+    ``np.append(D, 0)``."""
+
+    lens: LensModel = field(init=False, repr=False, default=LensModel.PINHOLE)
+    n_distortion: int = field(init=False, repr=False, default=5)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.K[0, 1] != 0:
+            raise ValueError(f"a pinhole K must have no skew (K[0, 1] = 0), got {self.K[0, 1]:g}")
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """``(N, 3)`` camera-frame points [m] → ``(N, 2)`` pixels (u, v); NaN where a
+        point is not in front of the lens (z < 1 µm)."""
+        p = np.asarray(points, dtype=np.float64)
+        if p.ndim != 2 or p.shape[1] != 3:
+            raise ValueError(f"project expects an (N, 3) array of points, got {p.shape}")
+        z = p[:, 2]
+        front = z >= PINHOLE_MIN_Z_M
+        zz = np.where(front, z, 1.0)
+        xp, yp = p[:, 0] / zz, p[:, 1] / zz
+        k1, k2, p1, p2, k3 = self.D
+        r2 = xp * xp + yp * yp
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        xpp = xp * radial + 2 * p1 * xp * yp + p2 * (r2 + 2 * xp * xp)
+        ypp = yp * radial + p1 * (r2 + 2 * yp * yp) + 2 * p2 * xp * yp
+        K = self.K
+        uv = np.column_stack([K[0, 0] * xpp + K[0, 2], K[1, 1] * ypp + K[1, 2]])
+        uv[~front] = np.nan
+        return uv
+
+    def unproject(self, pixels: np.ndarray) -> np.ndarray:
+        """``(N, 2)`` pixels → ``(N, 3)`` unit rays in the camera frame (z > 0); the
+        distortion is inverted by Newton's method from ``cv2.undistortPoints``' estimate
+        (its fixed-point iteration stops at a few 1e-4 px for strong distortion)."""
+        uv = np.asarray(pixels, dtype=np.float64)
+        if uv.ndim != 2 or uv.shape[1] != 2:
+            raise ValueError(f"unproject expects an (N, 2) array of pixels, got {uv.shape}")
+        if len(uv) == 0:
+            return np.zeros((0, 3))
+        K = self.K
+        xd = (uv[:, 0] - K[0, 2]) / K[0, 0]
+        yd = (uv[:, 1] - K[1, 2]) / K[1, 1]
+        x, y = cv2.undistortPoints(uv.reshape(-1, 1, 2), K, self.D).reshape(-1, 2).T.copy()
+        k1, k2, p1, p2, k3 = self.D
+        for _ in range(8):
+            r2 = x * x + y * y
+            radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            dradial = k1 + r2 * (2 * k2 + r2 * 3 * k3)  # d radial / d r2
+            fx = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x) - xd
+            fy = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y - yd
+            j11 = radial + 2 * x * x * dradial + 2 * p1 * y + 6 * p2 * x
+            j12 = 2 * x * y * dradial + 2 * p1 * x + 2 * p2 * y
+            j21 = 2 * x * y * dradial + 2 * p1 * x + 2 * p2 * y
+            j22 = radial + 2 * y * y * dradial + 6 * p1 * y + 2 * p2 * x
+            det = j11 * j22 - j12 * j21
+            with np.errstate(divide="ignore", invalid="ignore"):
+                x = x - (j22 * fx - j12 * fy) / det
+                y = y - (j11 * fy - j21 * fx) / det
+        rays = np.column_stack([x, y, np.ones(len(x))])
+        return rays / np.linalg.norm(rays, axis=1, keepdims=True)
