@@ -202,7 +202,7 @@ def test_corrupt_and_foreign_files(tmp_path: Path, content: bytes, match: str) -
 
 
 def test_missing_file_unknown_name_and_folder(tmp_path: Path) -> None:
-    with pytest.raises(CameraFileError, match="unknown camera 'sony'.*thesis, reference-car"):
+    with pytest.raises(CameraFileError, match=r"unknown camera 'sony'.*thesis, reference-car"):
         load_camera("sony")
     with pytest.raises(CameraFileError, match="no such file"):
         load_camera(tmp_path / "nothing.yaml")
