@@ -29,6 +29,7 @@ from .rois import (
     classify,
     follow,
     initial_rois,
+    row_lambda_scales,
     state_of,
     windows,
 )
@@ -102,6 +103,7 @@ class TfaldaDetector:
     def __init__(self, config: DetectorConfig | None = None) -> None:
         self.config = config or DetectorConfig.thesis()
         self.lis = LaneInferenceSystem(self.config.lis, self.config.layout.rows)
+        self._lambda_scale = row_lambda_scales(self.config.layout)
         self._frames = 0
         self._forced: StateKind | None = None
         self.reset()
@@ -161,7 +163,7 @@ class TfaldaDetector:
                 prev = None if first else self._previous[r][side]
                 if self._fresh_side is not None and self._fresh_side[r][side]:
                     prev = None
-                lane = self._find(crops[2 * r + side], roi, prev)
+                lane = self._find(crops[2 * r + side], roi, prev, self._lambda_scale[r])
                 if prev is not None and lane.i < cfg.lis.gap_hold_ratio * prev.i:
                     lane = prev  # no marking here (a gap): keep the last lane
                     held[2 * r + side] = True
@@ -210,8 +212,10 @@ class TfaldaDetector:
         object.__setattr__(obs, "next_rois", np.array(self.rois, dtype=np.int32))
         return obs
 
-    def _find(self, crop: np.ndarray, roi: Roi, prev: LaneSegment | None) -> LaneSegment:
-        """TFALDA on one ROI: the lane chosen among its candidates."""
+    def _find(self, crop: np.ndarray, roi: Roi, prev: LaneSegment | None,
+              lambda_scale: float) -> LaneSegment:
+        """TFALDA on one ROI: the lane chosen among its candidates (λ's pixel weights
+        divided by the row's ``lambda_scale``)."""
         tcfg = self.config.tfalda
         height = roi.height - 1
         horizontal = (tcfg.sobel_manager and prev is not None
@@ -228,8 +232,10 @@ class TfaldaDetector:
             k = int(np.argmax(i))  # first frame: the largest I (first of equals)
             lam = math.nan
         else:
-            lam_all = distance_lambda(p_img, d_img, i, prev.p, prev.d, prev.i, tcfg.kp,
-                                      tcfg.kd, tcfg.ki)
+            kp, kd = tcfg.kp, tcfg.kd
+            if lambda_scale != 1.0:
+                kp, kd = kp / lambda_scale, kd / lambda_scale
+            lam_all = distance_lambda(p_img, d_img, i, prev.p, prev.d, prev.i, kp, kd, tcfg.ki)
             k = int(np.argmin(lam_all))  # smallest λ (first of equals)
             lam = float(lam_all[k])
         return LaneSegment(float(p_img[k]), float(d_img[k]), float(i[k]), float(roi.y),
@@ -238,7 +244,8 @@ class TfaldaDetector:
     def _place(self, base: Rows, final: Rows, first: bool) -> StateKind:
         """Place the next frame's ROIs from ``base`` lanes; returns the driving state."""
         lis = self.config.lis
-        width = self.config.layout.image_width
+        layout = self.config.layout
+        width = layout.image_width
         if first or not lis.roi_placement:
             return self._state.kind
         state = self._state
@@ -251,11 +258,12 @@ class TfaldaDetector:
                 return StateKind.STRAIGHT
         new, kinds = [], []
         for (left, right), (lroi, rroi) in zip(base, self._rois, strict=True):
-            lnext, rnext = follow(left, lroi, width), follow(right, rroi, width)
+            lnext, rnext = follow(left, lroi, layout), follow(right, rroi, layout)
             row_state = state
             if self._forced is None and not isinstance(state, LaneChangeState):
-                row_state = classify(lnext, rnext) if lis.curve_states else StraightState()
-            lnext, rnext = row_state.correct(lnext, rnext, width)
+                row_state = (classify(lnext, rnext, layout) if lis.curve_states
+                             else StraightState())
+            lnext, rnext = row_state.correct(lnext, rnext, layout)
             new.append((lnext, rnext))
             kinds.append(row_state.kind)
         self._rois = new
@@ -265,7 +273,7 @@ class TfaldaDetector:
     def _hand_over(self, to_left: bool) -> None:
         """Lane change done: the line crossed becomes the far side's line of the new lane,
         and the near side searches afresh one lane width further over."""
-        width = self.config.layout.image_width
+        layout = self.config.layout
         assert self._previous is not None
         new_rois, new_prev, fresh = [], [], []
         for (left, right), (lroi, rroi) in zip(self._previous, self._rois, strict=True):
@@ -273,12 +281,12 @@ class TfaldaDetector:
             if to_left:  # old left line → new right line; new left line further left
                 moved = LaneSegment(left.p - lane_w, left.d, left.i, left.y_top, left.y_bottom)
                 new_prev.append((moved, left))
-                new_rois.append((follow(moved, lroi, width), follow(left, rroi, width)))
+                new_rois.append((follow(moved, lroi, layout), follow(left, rroi, layout)))
                 fresh.append([True, False])
             else:
                 moved = LaneSegment(right.p + lane_w, right.d, right.i, right.y_top, right.y_bottom)
                 new_prev.append((right, moved))
-                new_rois.append((follow(right, lroi, width), follow(moved, rroi, width)))
+                new_rois.append((follow(right, lroi, layout), follow(moved, rroi, layout)))
                 fresh.append([False, True])
         self._previous = new_prev
         self._rois = new_rois

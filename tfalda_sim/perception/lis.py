@@ -27,17 +27,19 @@ from .segment import LaneSegment
 Rows = list[tuple[LaneSegment, LaneSegment]]
 """Lanes per ROI row, top row first: (left, right)."""
 
-_LIMIT_ROWS_PX = np.array([260.0, 334.0, 340.0, 424.0])
-"""Image rows [px] where table 2.3's limits are measured: the upper ROI row's top and
-bottom edge and the lower row's (table 2.4 geometry)."""
-
-
 def width_limits(config: LisConfig, y_px: float) -> tuple[float, float]:
     """(min, max) lane width [px] at image row ``y_px``: table 2.3's values at its four
     rows, linear in between (for layouts with more than two rows) and held beyond."""
+    rows = np.asarray(config.width_limit_rows_px)
     lo = np.array([a for a, _ in config.width_limits_px])
     hi = np.array([b for _, b in config.width_limits_px])
-    return float(np.interp(y_px, _LIMIT_ROWS_PX, lo)), float(np.interp(y_px, _LIMIT_ROWS_PX, hi))
+    return float(np.interp(y_px, rows, lo)), float(np.interp(y_px, rows, hi))
+
+
+def tolerance_scale(config: LisConfig, y_px: float) -> float:
+    """The factor on the LIS's pixel tolerances at image row ``y_px`` (1 on the thesis'
+    camera)."""
+    return float(np.interp(y_px, config.width_limit_rows_px, config.tolerance_scale))
 
 
 def measured_widths(left: LaneSegment, right: LaneSegment) -> tuple[float, float]:
@@ -107,7 +109,9 @@ class LaneInferenceSystem:
                     ok = ok and lo <= measured[k] <= hi
             if ok and cfg.width_change:
                 seen = filtered if cfg.width_check is WidthCheck.FILTERED else measured
-                ok = bool(np.all(np.abs(seen - self.widths[r]) <= cfg.width_tolerance_px))
+                tol = cfg.width_tolerance_px * np.array(
+                    [tolerance_scale(cfg, left.y_top), tolerance_scale(cfg, left.y_bottom)])
+                ok = bool(np.all(np.abs(seen - self.widths[r]) <= tol))
             if not ok:
                 out[r] = previous[r]
                 replaced[r] = True
@@ -129,7 +133,7 @@ class LaneInferenceSystem:
         new, moved = [], []
         for up, low in zip(upper, lower, strict=True):
             x3 = vertical_target(up, low)
-            if abs(x3 - low.x_top) > cfg.vertical_tolerance_px:
+            if abs(x3 - low.x_top) > cfg.vertical_tolerance_px * tolerance_scale(cfg, low.y_top):
                 new.append(low.with_top(low.x_top + cfg.vertical_weight * (x3 - low.x_top)))
                 moved.append(True)
             else:

@@ -9,8 +9,14 @@ alles aktiviert" run, ``DetectorConfig.without_lis()`` its "ohne LIS" comparison
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field, replace
 from enum import Enum
+
+import numpy as np
+
+from ..camera import Camera, FisheyeCamera, load_camera
+from .geometry import CameraGeometry, camera_geometry
 
 # --------------------------------------------------------------------------- TFALDA
 KP: float = 7.33
@@ -71,6 +77,9 @@ WIDTH_LIMITS_PX: tuple[tuple[float, float], ...] = ((45.0, 220.0), (200.0, 272.0
 """Lane width limits (min, max) [px] at the upper row's top and bottom edge and the lower
 row's top and bottom edge (table 2.3). Listing A.4 has 40–240 and 180–292 for the upper
 row; the table is used (it is the design, the listing a tuning left in the code)."""
+WIDTH_LIMIT_ROWS_PX: tuple[float, float, float, float] = (260.0, 334.0, 340.0, 424.0)
+"""Image rows [px] where table 2.3's limits apply: the upper ROI row's top and bottom row
+and the lower row's (table 2.4: 260 + 75 − 1 = 334, 340 + 85 − 1 = 424)."""
 VERTICAL_TOLERANCE_PX: float = 5.0
 """The lower lane's upper end is moved onto the upper lane's line when they differ by
 more than this [px] (listing A.4, ``toleranz``)."""
@@ -151,6 +160,13 @@ class LisConfig:
     width_check: WidthCheck = WidthCheck.FILTERED
     width_tolerance_px: float = WIDTH_CHANGE_TOLERANCE_PX
     width_limits_px: tuple[tuple[float, float], ...] = WIDTH_LIMITS_PX
+    width_limit_rows_px: tuple[float, float, float, float] = WIDTH_LIMIT_ROWS_PX
+    """Image rows [px] of ``width_limits_px``: the upper ROI row's top and bottom row and
+    the lower row's (table 2.4's rows for table 2.3's limits); linear in between."""
+    tolerance_scale: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+    """This camera's pixels per thesis pixel on the ground at ``width_limit_rows_px``: the
+    width-change and vertical tolerances (11 px, 5 px on the thesis' camera) are multiplied
+    by it at each row (linear in between). 1 for the thesis camera."""
     vertical_tolerance_px: float = VERTICAL_TOLERANCE_PX
     vertical_weight: float = 1.0
     """Improvement (section 5.1): the lower lane's end moves this fraction of the way to
@@ -169,6 +185,12 @@ class LisConfig:
         if self.lowpass_rc < 0 or self.lowpass_dt <= 0:
             raise ValueError("lowpass_rc must be ≥ 0 and lowpass_dt > 0 "
                              f"(got {self.lowpass_rc}, {self.lowpass_dt})")
+        rows = self.width_limit_rows_px
+        if len(rows) != 4 or any(b < a for a, b in itertools.pairwise(rows)):
+            raise ValueError(f"width_limit_rows_px needs four rows top to bottom, got {rows}")
+        if len(self.tolerance_scale) != 4 or not all(s > 0 for s in self.tolerance_scale):
+            raise ValueError(f"tolerance_scale needs four positive factors, got "
+                             f"{self.tolerance_scale}")
         if len(self.width_limits_px) != 4 or any(lo >= hi for lo, hi in self.width_limits_px):
             raise ValueError("width_limits_px needs four (min, max) pairs with min < max: "
                              "upper row top, upper row bottom, lower row top, lower row bottom")
@@ -192,22 +214,59 @@ class LisConfig:
                    roi_reset=False, curve_states=False)
 
 
+from .geometry import Rect  # noqa: E402  (one name for an image rectangle)
+
+
 @dataclass(frozen=True)
 class RoiLayout:
-    """The ROI rows: ``rows`` ≥ 2 rows of (left, right) ROIs over the band the thesis'
-    two rows cover (table 2.4). More rows approximate a curve with more segments
-    (section 5.1's second weakness); two rows reproduce table 2.4 exactly."""
+    """Where the ROIs go, in pixels of one camera: ``rows`` ≥ 2 rows of (left, right) ROIs
+    over the band the two rows of ``table_px`` cover, and the pixel sizes of ROI
+    placement. The defaults are the thesis' literal numbers (table 2.4, listings A.6 and
+    3.5); ``perception.geometry.layout_for_camera`` derives them for any camera from their
+    ground-plane definitions. More rows approximate a curve with more segments (section
+    5.1's second weakness); two rows reproduce ``table_px`` exactly."""
 
     rows: int = 2
     image_width: int = IMAGE_WIDTH_PX
     image_height: int = IMAGE_HEIGHT_PX
+    table_px: tuple[Rect, Rect, Rect, Rect] = INITIAL_ROIS
+    """The initial ROIs of two rows: upper-left, upper-right, lower-left, lower-right."""
+    margin_left_px: int = ROI_MARGIN_LEFT_PX
+    extra_width_px: int = ROI_EXTRA_WIDTH_PX
+    min_width_px: int = ROI_MIN_WIDTH_PX
+    max_width_px: int = ROI_MAX_WIDTH_PX
+    border_px: int = ROI_BORDER_PX
+    left_curve_right_roi_x_px: int = LEFT_CURVE_RIGHT_ROI_X_PX
+    right_curve_left_roi_end_px: int = RIGHT_CURVE_LEFT_ROI_END_PX
+    lambda_scale: tuple[float, float] = (1.0, 1.0)
+    """This camera's pixels per thesis pixel on the ground at the upper and lower row of
+    ``table_px`` (rows in between interpolated): λ's start-point and direction weights
+    (``kp``, ``kd`` [1/px]) are divided by it, so that a metre of offset costs what it
+    cost on the thesis' camera. 1 for the thesis camera."""
 
     def __post_init__(self) -> None:
         if not 2 <= self.rows <= 8:
             raise ValueError(f"rows must be in 2..8, got {self.rows}")
-        if self.image_width < 2 * (ROI_MAX_WIDTH_PX + ROI_BORDER_PX) or self.image_height < 430:
-            raise ValueError(f"image {self.image_width}×{self.image_height} is too small for "
-                             "the thesis' ROI band (rows 260–425)")
+        if not 0 < self.min_width_px <= self.max_width_px:
+            raise ValueError(f"ROI widths need 0 < min_width_px ≤ max_width_px, got "
+                             f"{self.min_width_px}, {self.max_width_px}")
+        if self.image_width < 2 * (self.max_width_px + self.border_px):
+            raise ValueError(f"image width {self.image_width} px is too small for two ROIs of "
+                             f"the widest {self.max_width_px} px")
+        (_, uly, _, ulh), (_, ury, _, urh), (_, lly, _, llh), (_, lry, _, lrh) = self.table_px
+        if uly != ury or ulh != urh or lly != lry or llh != lrh or uly + ulh > lly:
+            raise ValueError("table_px: the two ROIs of a row share their rows, and the upper "
+                             f"row lies above the lower one; got {self.table_px}")
+        for x, y, w, h in self.table_px:
+            if x < 0 or y < 0 or w < 1 or h < 2 or x + w > self.image_width \
+                    or y + h > self.image_height:
+                raise ValueError(f"table_px ROI {(x, y, w, h)} does not lie inside the "
+                                 f"{self.image_width}×{self.image_height} image")
+        if lly + llh - uly < 2 * self.rows:
+            raise ValueError(f"the ROI band (rows {uly}–{lly + llh}) is too low for "
+                             f"{self.rows} rows")
+        if not all(s > 0 for s in self.lambda_scale):
+            raise ValueError(f"lambda_scale must be positive, got {self.lambda_scale}")
 
 
 @dataclass(frozen=True)
@@ -238,3 +297,56 @@ class DetectorConfig:
         return cls(lis=replace(LisConfig(), gap_hold_ratio=0.7, vertical_weight=0.5,
                                lane_change_state=True),
                    layout=RoiLayout(rows=rows))
+
+    @classmethod
+    def for_camera(cls, camera: Camera | str, base: DetectorConfig | None = None
+                   ) -> DetectorConfig:
+        """``base`` (default: the thesis preset) with every pixel number derived for
+        ``camera`` (a camera, a profile name or a file) from its ground-plane definition
+        (``perception.geometry``): the ROIs, the width limits and their rows, the ROI
+        sizes, the curve thresholds, the LIS's tolerances and λ's weights. On the thesis
+        camera it agrees with ``thesis()`` within ``geometry.THESIS_AGREEMENT_PX``.
+        Raises ``CameraGeometryError`` naming what a camera cannot see."""
+        base = base or cls.thesis()
+        geo = geometry_of(load_camera(camera))
+        layout = replace(
+            base.layout, image_width=geo.width, image_height=geo.height, table_px=geo.table_px,
+            margin_left_px=geo.margin_left_px, extra_width_px=geo.extra_width_px,
+            min_width_px=geo.min_width_px, max_width_px=geo.max_width_px,
+            left_curve_right_roi_x_px=geo.left_curve_right_roi_x_px,
+            right_curve_left_roi_end_px=geo.right_curve_left_roi_end_px,
+            lambda_scale=geo.lambda_scale)
+        lis = replace(base.lis, width_limits_px=geo.width_limits_px,
+                      width_limit_rows_px=geo.width_limit_rows_px,
+                      tolerance_scale=geo.tolerance_scale)
+        return cls(tfalda=base.tfalda, lis=lis, layout=layout)
+
+
+def geometry_of(camera: Camera) -> CameraGeometry:
+    """``camera``'s derived layout (computed once per camera object and cached)."""
+    cached = _GEOMETRY_CACHE.get(id(camera))
+    if cached is not None and cached[0] is camera:
+        return cached[1]
+    geo = camera_geometry(camera, ROI_BORDER_PX, WIDTH_CHANGE_TOLERANCE_PX)
+    if len(_GEOMETRY_CACHE) >= 32:
+        _GEOMETRY_CACHE.pop(next(iter(_GEOMETRY_CACHE)))
+    _GEOMETRY_CACHE[id(camera)] = (camera, geo)
+    return geo
+
+
+_GEOMETRY_CACHE: dict[int, tuple[Camera, CameraGeometry]] = {}
+
+
+def is_thesis_camera(camera: Camera) -> bool:
+    """Whether ``camera`` is the thesis camera (``FisheyeCamera.default()``: same lens,
+    size, mount and bonnet), whose pixel numbers are the thesis' own."""
+    ref = _THESIS_CAMERA
+    b, rb = camera.bonnet, ref.bonnet
+    return (type(camera) is type(ref) and camera.width == ref.width
+            and camera.height == ref.height and np.array_equal(camera.K, ref.K)
+            and np.array_equal(camera.D, ref.D) and camera.mount == ref.mount
+            and b.enabled == rb.enabled and b.polygon_px is None
+            and (b.top_row, b.edge_drop_px) == (rb.top_row, rb.edge_drop_px))
+
+
+_THESIS_CAMERA = FisheyeCamera.default()

@@ -12,25 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import Enum
 
-from .params import (
-    INITIAL_ROIS,
-    LEFT_CURVE_RIGHT_ROI_X_PX,
-    RIGHT_CURVE_LEFT_ROI_END_PX,
-    ROI_BORDER_PX,
-    ROI_EXTRA_WIDTH_PX,
-    ROI_MARGIN_LEFT_PX,
-    ROI_MAX_WIDTH_PX,
-    ROI_MIN_WIDTH_PX,
-    RoiLayout,
-)
+from .params import RoiLayout
 from .segment import LaneSegment
-
-ROI_BAND_TOP_PX: int = INITIAL_ROIS[0][1]
-"""Top row of the ROI band [px] (table 2.4: 260)."""
-ROI_BAND_BOTTOM_PX: int = INITIAL_ROIS[2][1] + INITIAL_ROIS[2][3]
-"""One past the bottom row of the ROI band [px] (table 2.4: 340 + 85 = 425)."""
-ROI_ROW_GAP_PX: int = INITIAL_ROIS[2][1] - INITIAL_ROIS[0][1] - INITIAL_ROIS[0][3]
-"""Rows left free between two ROI rows [px] (table 2.4: 340 − 260 − 75 = 5)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,46 +45,65 @@ class StateKind(Enum):
 
 
 def row_geometry(layout: RoiLayout) -> list[tuple[int, int]]:
-    """``(y, height)`` [px] of each ROI row, top to bottom. Two rows are table 2.4; more
-    rows split the same band evenly, keeping its 5 px gaps."""
+    """``(y, height)`` [px] of each ROI row, top to bottom. Two rows are the layout's table
+    (table 2.4 on the thesis' camera); more rows split the same band evenly, keeping the
+    gap between its rows (5 px in table 2.4)."""
+    ul, _, ll, _ = layout.table_px
     if layout.rows == 2:
-        return [(INITIAL_ROIS[0][1], INITIAL_ROIS[0][3]), (INITIAL_ROIS[2][1], INITIAL_ROIS[2][3])]
-    pitch = (ROI_BAND_BOTTOM_PX - ROI_BAND_TOP_PX + ROI_ROW_GAP_PX) / layout.rows
-    tops = [ROI_BAND_TOP_PX + round(k * pitch) for k in range(layout.rows)]
-    bottoms = [*(t - ROI_ROW_GAP_PX for t in tops[1:]), ROI_BAND_BOTTOM_PX]
+        return [(ul[1], ul[3]), (ll[1], ll[3])]
+    top, bottom = ul[1], ll[1] + ll[3]
+    gap = ll[1] - ul[1] - ul[3]
+    pitch = (bottom - top + gap) / layout.rows
+    tops = [top + round(k * pitch) for k in range(layout.rows)]
+    bottoms = [*(t - gap for t in tops[1:]), bottom]
     return [(t, b - t) for t, b in zip(tops, bottoms, strict=True)]
 
 
 def initial_rois(layout: RoiLayout) -> list[tuple[Roi, Roi]]:
-    """The start-up ROIs, (left, right) per row, top to bottom: table 2.4 for two rows;
-    for more rows the table's x and width interpolated (and extrapolated) in y."""
+    """The start-up ROIs, (left, right) per row, top to bottom: the layout's table for two
+    rows; for more rows the table's x and width interpolated (and extrapolated) in y."""
     out = []
-    ul, ur, ll, lr = INITIAL_ROIS
+    ul, ur, ll, lr = layout.table_px
     for y, h in row_geometry(layout):
         t = (y - ul[1]) / (ll[1] - ul[1])
         left_x = round(ul[0] + t * (ll[0] - ul[0]))
         left_w = round(ul[2] + t * (ll[2] - ul[2]))
         right_x = round(ur[0] + t * (lr[0] - ur[0]))
         right_w = round(ur[2] + t * (lr[2] - ur[2]))
-        out.append((clamp(Roi(left_x, y, left_w, h), layout.image_width),
-                    clamp(Roi(right_x, y, right_w, h), layout.image_width)))
+        out.append((clamp(Roi(left_x, y, left_w, h), layout),
+                    clamp(Roi(right_x, y, right_w, h), layout)))
     return out
 
 
-def clamp(roi: Roi, image_width: int) -> Roi:
-    """``roi`` kept inside the image with ``ROI_BORDER_PX`` to spare on both sides and at
-    least ``ROI_MIN_WIDTH_PX`` wide (whatever the lanes did)."""
-    width = min(max(roi.width, ROI_MIN_WIDTH_PX), image_width - 2 * ROI_BORDER_PX)
-    x = min(max(roi.x, ROI_BORDER_PX), image_width - ROI_BORDER_PX - width)
+def row_lambda_scales(layout: RoiLayout) -> list[float]:
+    """λ's weight divisor of each ROI row (``RoiLayout.lambda_scale`` interpolated over the
+    rows' middles; 1 everywhere on the thesis' camera)."""
+    upper, lower = layout.lambda_scale
+    if upper == lower:
+        return [upper] * layout.rows
+    ul, _, ll, _ = layout.table_px
+    y0, y1 = ul[1] + ul[3] / 2, ll[1] + ll[3] / 2
+    return [upper + (lower - upper) * ((y + h / 2) - y0) / (y1 - y0)
+            for y, h in row_geometry(layout)]
+
+
+def clamp(roi: Roi, layout: RoiLayout) -> Roi:
+    """``roi`` kept inside the image with ``border_px`` to spare on both sides and at
+    least ``min_width_px`` wide (whatever the lanes did)."""
+    border, image_width = layout.border_px, layout.image_width
+    width = min(max(roi.width, layout.min_width_px), image_width - 2 * border)
+    x = min(max(roi.x, border), image_width - border - width)
     return Roi(x, roi.y, width, roi.height)
 
 
-def follow(lane: LaneSegment, roi: Roi, image_width: int) -> Roi:
-    """The next ROI over ``lane`` (listing A.6): from 50 px left of its leftmost end,
-    75 px + |D| wide, the width clamped to [100, 275] and the ROI into the image."""
-    x = round(min(lane.x_top, lane.x_bottom)) - ROI_MARGIN_LEFT_PX
-    width = min(max(ROI_EXTRA_WIDTH_PX + round(abs(lane.d)), ROI_MIN_WIDTH_PX), ROI_MAX_WIDTH_PX)
-    return clamp(Roi(x, roi.y, width, roi.height), image_width)
+def follow(lane: LaneSegment, roi: Roi, layout: RoiLayout) -> Roi:
+    """The next ROI over ``lane`` (listing A.6): from ``margin_left_px`` (50 px) left of
+    its leftmost end, ``extra_width_px`` (75 px) + |D| wide, the width clamped to
+    [``min_width_px``, ``max_width_px``] ([100, 275] px) and the ROI into the image."""
+    x = round(min(lane.x_top, lane.x_bottom)) - layout.margin_left_px
+    width = min(max(layout.extra_width_px + round(abs(lane.d)), layout.min_width_px),
+                layout.max_width_px)
+    return clamp(Roi(x, roi.y, width, roi.height), layout)
 
 
 class StraightState:
@@ -110,7 +112,7 @@ class StraightState:
 
     kind = StateKind.STRAIGHT
 
-    def correct(self, left: Roi, right: Roi, image_width: int) -> tuple[Roi, Roi]:
+    def correct(self, left: Roi, right: Roi, layout: RoiLayout) -> tuple[Roi, Roi]:
         return left, right
 
 
@@ -120,10 +122,10 @@ class LeftCurveState:
 
     kind = StateKind.LEFT_CURVE
 
-    def correct(self, left: Roi, right: Roi, image_width: int) -> tuple[Roi, Roi]:
+    def correct(self, left: Roi, right: Roi, layout: RoiLayout) -> tuple[Roi, Roi]:
         k = max(0, left.end - right.x) // 2
-        x = max(ROI_BORDER_PX, left.x - k)
-        return Roi(x, left.y, max(ROI_MIN_WIDTH_PX, left.width - k), left.height), right
+        x = max(layout.border_px, left.x - k)
+        return Roi(x, left.y, max(layout.min_width_px, left.width - k), left.height), right
 
 
 class RightCurveState:
@@ -134,11 +136,11 @@ class RightCurveState:
 
     kind = StateKind.RIGHT_CURVE
 
-    def correct(self, left: Roi, right: Roi, image_width: int) -> tuple[Roi, Roi]:
+    def correct(self, left: Roi, right: Roi, layout: RoiLayout) -> tuple[Roi, Roi]:
         k = max(0, left.end - right.x) // 2
         x = right.x + k
-        width = max(ROI_MIN_WIDTH_PX, right.width - k)
-        width -= max(0, x + width - (image_width - ROI_BORDER_PX))
+        width = max(layout.min_width_px, right.width - k)
+        width -= max(0, x + width - (layout.image_width - layout.border_px))
         return left, Roi(x, right.y, width, right.height)
 
 
@@ -151,7 +153,7 @@ class LaneChangeState:
         self.to_left = to_left
         self.kind = StateKind.LANE_CHANGE_LEFT if to_left else StateKind.LANE_CHANGE_RIGHT
 
-    def correct(self, left: Roi, right: Roi, image_width: int) -> tuple[Roi, Roi]:
+    def correct(self, left: Roi, right: Roi, layout: RoiLayout) -> tuple[Roi, Roi]:
         return left, right
 
     def crossed(self, left_bottom_x: float, right_bottom_x: float, image_width: int) -> bool:
@@ -171,15 +173,15 @@ def state_of(kind: StateKind) -> DrivingState:
             StateKind.LANE_CHANGE_RIGHT: lambda: LaneChangeState(False)}[kind]()
 
 
-def classify(left: Roi, right: Roi) -> DrivingState:
+def classify(left: Roi, right: Roi, layout: RoiLayout) -> DrivingState:
     """The state listing 3.5 reads off one row's ROIs: they overlap and the right one
-    starts left of x = 325 → left curve; they overlap and the left one ends right of
-    x = 425 → right curve (the left curve is tested first, as in the listing); else
-    straight."""
+    starts left of ``left_curve_right_roi_x_px`` (x = 325) → left curve; they overlap and
+    the left one ends right of ``right_curve_left_roi_end_px`` (x = 425) → right curve (the
+    left curve is tested first, as in the listing); else straight."""
     overlap = left.end > right.x
-    if overlap and right.x < LEFT_CURVE_RIGHT_ROI_X_PX:
+    if overlap and right.x < layout.left_curve_right_roi_x_px:
         return LeftCurveState()
-    if overlap and left.end > RIGHT_CURVE_LEFT_ROI_END_PX:
+    if overlap and left.end > layout.right_curve_left_roi_end_px:
         return RightCurveState()
     return StraightState()
 
