@@ -20,7 +20,8 @@ from .cli_common import EXIT_BAD_INPUT, EXIT_NEGATIVE, CliError, interrupted
 from .interrupts import is_interrupt, stop_signals_interrupt
 from .outputs import OutputError
 
-COMMAND_MODULES: tuple[str, ...] = ("tracks.command", "rendering.command", "evaluation.command",
+COMMAND_MODULES: tuple[str, ...] = ("tracks.command", "camera.command", "rendering.command",
+                                    "evaluation.command",
                                     "agents.command", "replay.command")
 """The domains' command modules (under ``tfalda_sim``), in the order ``--help`` lists them;
 imported by ``build_parser``, inside ``main``'s error handling (numba, OpenCV and the
