@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import cv2
+import numpy as np
 import pytest
 
 from tests.cli_helpers import command_tree, leaf_commands
@@ -181,6 +182,54 @@ def test_track_validate(generated_track: tuple[Run, Path]) -> None:
 
 
 # --------------------------------------------------------------------------- render
+# --------------------------------------------------------------------------- camera
+REFERENCE_FRAMES = Path(__file__).parent / "data" / "reference"
+
+
+@covers("camera", "fit")
+def test_camera_fit(tmp_path: Path) -> None:
+    frame = REFERENCE_FRAMES / "straight-road.png"
+    doc = tfalda("camera", "fit", frame, "--fit-focal", "--out", "car.yaml", "--json",
+                 cwd=tmp_path).json()
+    assert doc["residual_px"] < 1.0 and doc["roll_fitted"], doc
+    assert_png(tmp_path / "car-fit.png", (480, 752, 3))
+    shown = tfalda("camera", "show", "car.yaml", "--json", cwd=tmp_path).json()
+    reference = tfalda("camera", "show", "reference-car", "--json", cwd=tmp_path).json()
+    assert shown["mount"] == reference["mount"] and shown["camera_matrix"] == \
+        reference["camera_matrix"]
+    # exists → --force; contradictory flags, bad input: one line, exit 2, nothing written
+    again = tfalda("camera", "fit", frame, "--fit-focal", "--out", "car.yaml", cwd=tmp_path,
+                   code=2)
+    assert "--force" in again.err
+    both = tfalda("camera", "fit", frame, "--fit-focal", "--intrinsics", "car.yaml", "--out",
+                  "b.yaml", cwd=tmp_path, code=2)
+    assert "not allowed with" in both.err
+    cv2.imwrite(str(tmp_path / "flat.png"), np.full((480, 752), 40, np.uint8))
+    flat = tfalda("camera", "fit", "flat.png", "--intrinsics", "car.yaml", "--out", "c.yaml",
+                  cwd=tmp_path, code=2)
+    assert "no markings found" in flat.err and not (tmp_path / "c.yaml").exists()
+    assert not (tmp_path / "c-fit.png").exists()
+    refit = tfalda("camera", "fit", frame, "--intrinsics", "car.yaml", "--out", "d.yaml",
+                   "--json", cwd=tmp_path).json()
+    assert abs(refit["height_m"] - doc["height_m"]) < 0.002
+
+
+@covers("camera", "show")
+def test_camera_show(tmp_path: Path) -> None:
+    text = tfalda("camera", "show", "thesis", cwd=tmp_path).out
+    assert "format: tfalda-sim-camera/1" in text and "parabola" in text
+    doc = tfalda("camera", "show", "reference-car", "--json", cwd=tmp_path).json()
+    assert doc["lens"] == "fisheye" and "polygon_px" in doc["bonnet"]
+    bad = tfalda("camera", "show", "sony", cwd=tmp_path, code=2)
+    assert "unknown camera 'sony'" in bad.err
+
+
+@covers("camera", "list")
+def test_camera_list(tmp_path: Path) -> None:
+    assert tfalda("camera", "list", "--json", cwd=tmp_path).json() == {
+        "cameras": ["thesis", "reference-car"]}
+
+
 @covers("render")
 def test_render(tmp_path: Path) -> None:
     doc = tfalda("render", "--track", "oval", "--s", "1", "--out", "F.png", "--truth", "G.png",

@@ -16,6 +16,7 @@ import numpy as np
 from ..cli_common import CliError, add_force_option, add_json_option, check_outputs
 from ..outputs import Outputs
 from .bonnet import Bonnet
+from .drawing import fit_overlay
 from .fit import MountFit, MountFitError, detect_bonnet, fit_focal, fit_mount
 from .models import Camera, LensModel
 from .mount import CameraMount
@@ -187,7 +188,6 @@ def cmd_camera_fit(args: argparse.Namespace) -> int:
     if args.fit_focal and args.points:
         raise CliError("--points needs known intrinsics (--intrinsics), not --fit-focal")
     frame = _read_frame(args.frame)
-    bonnet = _bonnet(args.bonnet, frame)
     points = _points(args.points) if args.points else None
     try:
         if args.fit_focal:
@@ -198,14 +198,13 @@ def cmd_camera_fit(args: argparse.Namespace) -> int:
             intr = load_intrinsics(args.intrinsics, LensModel(args.lens) if args.lens else None)
             base = intr.camera(CameraMount())
             fit = fit_mount(frame, base, points=points, forward_m=args.forward_m)
+        bonnet = _bonnet(args.bonnet, frame)
     except CameraFileError as exc:
         raise CliError(f"--intrinsics: {exc}") from None
     except MountFitError as exc:
         raise CliError(f"{args.frame}: {exc}") from None
     fit = MountFit(fit.camera.replace(bonnet=bonnet), fit.lines, fit.residual_px,
                    fit.roll_fitted, fit.focal_px)
-    from .drawing import fit_overlay
-
     summary = fit_summary(fit)
     with Outputs() as outs:  # the profile and its overlay, or neither
         outs.path(args.out).write_text(profile_text(fit.camera, args.description),

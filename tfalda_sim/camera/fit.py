@@ -52,6 +52,11 @@ VANISHING_TOLERANCE_RAD: float = math.radians(1.0)
 """Lines are parallel on the ground when their great circles pass within this angle of a
 common vanishing point [rad]."""
 
+RESIDUAL_OUTLIER_PX: float = 10.0
+"""Marking pixels farther than this from their fitted model line are left out of the
+residual [px]: they belong to other structures on the same great circle (5 × the inlier
+band)."""
+
 MAX_ROLL_RAD: float = math.radians(30.0)
 """Largest roll the fit searches [rad]."""
 
@@ -284,10 +289,15 @@ def _road_lines(circles: list[tuple[np.ndarray, np.ndarray]], rays: np.ndarray,
         raise MountFitError("found no two parallel lines in the frame (no two straight "
                             "lines share a vanishing point ahead): is the road straight?")
     direction = _vanishing([circles[k][0] for k in best])
-    # Below the horizon only: the road's lines, not the hall's.
-    sel = [k for k in best if np.median(rays[circles[k][1]] @ _up_guess(direction)) < 0]
+    # Below the horizon only: a great circle's other half (walls, the hall) is not the
+    # road's line.
+    up = _up_guess(direction)
+    below = {k: circles[k][1][rays[circles[k][1]] @ up < -math.sin(math.radians(0.5))]
+             for k in best}
+    sel = [k for k in best if len(below[k]) >= MIN_LINE_PIXELS]
     if len(sel) < 2:
         raise MountFitError("found no two parallel lines below the horizon")
+    circles = [(n, below.get(k, idx)) for k, (n, idx) in enumerate(circles)]
     cov = {k: _coverage(rays[circles[k][1]], circles[k][0], direction) for k in sel}
     order = sorted(sel, key=lambda k: _lateral_angle(circles[k][0], direction))  # left first
     dashed = [k for k in order if cov[k] < DASHED_COVERAGE]
@@ -368,7 +378,9 @@ def _residual(camera: Camera, used: list[LineFit], centre_y_car: float) -> float
     """RMS pixel distance of the used lines' pixels to their model lines' images."""
     offsets = {"left": LANE_WIDTH_M, "centre": 0.0, "right": -LANE_WIDTH_M}
     sq = []
-    ahead = camera.mount.forward_m + np.geomspace(0.05, 40.0, 3000)
+    # from beside and behind the camera (a fisheye sees there) to far ahead [m]
+    ahead = camera.mount.forward_m + np.concatenate([np.linspace(-1.0, 0.05, 1000),
+                                                     np.geomspace(0.05, 40.0, 3000)])
     for f in used:
         y = centre_y_car + offsets[f.role]
         uv = camera.project(camera.car_to_camera(np.column_stack(
@@ -380,7 +392,10 @@ def _residual(camera: Camera, used: list[LineFit], centre_y_car: float) -> float
             p = f.pixels[start:start + 500]
             d2 = np.min(np.sum((p[:, None, :] - uv[None, :, :]) ** 2, axis=2), axis=1)
             sq.append(d2)
-    return float(np.sqrt(np.mean(np.concatenate(sq))))
+    d2 = np.concatenate(sq)
+    # Pixels far off every model line are other structures on the same great circle.
+    d2 = d2[d2 <= (RESIDUAL_OUTLIER_PX) ** 2]
+    return float(np.sqrt(np.mean(d2))) if len(d2) else math.inf
 
 
 def fit_focal(frame: np.ndarray, width: int, height: int, *, seed: int = 0) -> MountFit:

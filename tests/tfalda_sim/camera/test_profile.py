@@ -68,6 +68,8 @@ def test_profiles_round_trip_exactly(tmp_path: Path, name: str) -> None:
 def test_named_profiles() -> None:
     assert set(NAMED_CAMERAS) == {"thesis", "reference-car"}
     assert same_camera(load_camera("thesis"), FisheyeCamera.default())
+    ref = load_camera("reference-car")
+    assert ref.bonnet.polygon_px is not None and (ref.width, ref.height) == (752, 480)
     cam = FisheyeCamera.default()
     assert load_camera(cam) is cam
 
