@@ -65,6 +65,7 @@ blanks road, marking pixels included; ``car_mask=()`` turns it off.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -72,6 +73,7 @@ import cv2
 import numpy as np
 from numba import njit
 
+from ..camera import Camera, load_camera
 from .detector import check_frame
 from .params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX
 
@@ -148,6 +150,25 @@ the markings, the "reflections" the seed names as a weak spot; the HSHL car's Gy
 Lidar do not exist on this car."""
 
 
+REAL_FRAME_BINARISE_LEVEL: float = 0.6
+"""``binarise_level`` for the reference car's real frames (``../shared/reference/``)
+[fraction of full scale]: their markings peak at 204–249 DN near the car and ≈ 180 DN at
+the far dashes, the road's brightest non-marking pixels (p99) at ≈ 124 DN; 0.6 (≥ 153 DN)
+keeps the markings and leaves the road. The seed's 0.9 keeps nothing of
+``start-road.png``, whose markings stay below 230 DN."""
+CROP_FAR_M: float = 5.0
+"""Where ``HoughConfig.for_camera`` starts the crop [m ahead of the camera]. The seed's
+crop starts just below its camera's horizon (row 219; 9.5 m ahead on the thesis camera);
+a straight-line model gains nothing from further than 5 m — a curve at the rules'
+tightest radius leaves a straight line by a lane width within ≈ 1.5 m — and there all
+lines converge on the vanishing point and outvote the near ones: from 9.5 m the branching
+line of ``../shared/reference/start-road.png`` gets no peak, from 5 m it does (measured,
+docs/cameras.md). Row 226 on the thesis camera."""
+MASK_BANDS: int = 16
+"""Column bands of the derived car mask [1]: each masks from the bonnet's highest row in
+its columns (the seed masks its car with rectangles too)."""
+
+
 # --------------------------------------------------------------------------- configuration
 @dataclass(frozen=True)
 class HoughConfig:
@@ -155,6 +176,10 @@ class HoughConfig:
 
     crop_top_px: int = CROP_TOP_PX
     """First row of the region of interest, 0-based [px]."""
+    image_width_px: int = IMAGE_WIDTH_PX
+    """Frame width [px] (the seed's camera: 752)."""
+    image_height_px: int = IMAGE_HEIGHT_PX
+    """Frame height [px] (the seed's camera: 480)."""
     crop_height_px: int = CROP_HEIGHT_PX
     """Rows of the region of interest [px]. It always spans the full image width."""
     binarise_level: float = BINARISE_LEVEL
@@ -194,17 +219,60 @@ class HoughConfig:
         markings and its car's bonnet as the mask (``SIMULATOR_*``); all else the seed's."""
         return cls(binarise_level=SIMULATOR_BINARISE_LEVEL, car_mask=SIMULATOR_CAR_MASK)
 
+    @classmethod
+    def for_camera(cls, camera: Camera | str, binarise_level: float = BINARISE_LEVEL
+                   ) -> HoughConfig:
+        """The seed's settings with its crop and car mask derived for ``camera`` (a
+        camera, profile name or file): the crop from ``CROP_FAR_M`` ahead down to the
+        lowest row where road is seen, the mask over
+        the camera's bonnet in ``MASK_BANDS`` column bands. ``binarise_level`` is a
+        property of the frames, not the camera: the seed's 0.9 for real frames,
+        ``SIMULATOR_BINARISE_LEVEL`` for the simulator's renders."""
+        from .geometry import CameraGeometryError, row_at
+
+        cam = load_camera(camera)
+        top = row_at(cam, CROP_FAR_M)
+        if not math.isfinite(top) or top > cam.height - 2:
+            raise CameraGeometryError(f"the camera does not see the road {CROP_FAR_M:.1f} m "
+                                      "ahead (the top of the Hough baseline's crop)")
+        top_px = max(0, round(top))
+        cols = np.arange(cam.width)
+        edge = cam.bonnet.edge(cols, cam.width, cam.height)
+        lowest_road = cam.height if not np.isfinite(edge).all() else math.ceil(edge.max())
+        bottom = min(cam.height, lowest_road)
+        height = bottom - top_px
+        if height < 2:
+            raise CameraGeometryError("the car's body hides the whole Hough crop")
+        mask = []
+        bounds = np.linspace(0, cam.width, MASK_BANDS + 1).round().astype(int)
+        for c0, c1 in itertools.pairwise(bounds):
+            band = edge[c0:c1]
+            if not np.isfinite(band).any():
+                continue
+            r0 = max(0, math.ceil(float(np.min(band))) - top_px)
+            if r0 < height:
+                mask.append((r0, height, int(c0), int(c1)))
+        return cls(crop_top_px=top_px, crop_height_px=height, image_width_px=cam.width,
+                   image_height_px=cam.height, binarise_level=binarise_level,
+                   car_mask=tuple(mask))
+
     def __post_init__(self) -> None:
-        for name in ("crop_top_px", "crop_height_px", "merge_max_gap_px", "num_peaks"):
+        for name in ("crop_top_px", "crop_height_px", "merge_max_gap_px", "num_peaks",
+                     "image_width_px", "image_height_px"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
                 raise ValueError(f"{name} must be an integer, got {v!r}")
-        if not 0 <= self.crop_top_px < IMAGE_HEIGHT_PX:
-            raise ValueError(f"crop_top_px must be in [0, {IMAGE_HEIGHT_PX}), got "
+        H = self.image_height_px
+        if not (isinstance(H, (int, np.integer)) and 16 <= H <= 8192 and isinstance(
+                self.image_width_px, (int, np.integer)) and 16 <= self.image_width_px <= 8192):
+            raise ValueError(f"image size must be integers in [16, 8192] px, got "
+                             f"{self.image_width_px}×{H}")
+        if not 0 <= self.crop_top_px < H:
+            raise ValueError(f"crop_top_px must be in [0, {H}), got "
                              f"{self.crop_top_px}")
-        if not 2 <= self.crop_height_px <= IMAGE_HEIGHT_PX - self.crop_top_px:
-            raise ValueError(f"crop_height_px must be in [2, {IMAGE_HEIGHT_PX} − crop_top_px = "
-                             f"{IMAGE_HEIGHT_PX - self.crop_top_px}], got "
+        if not 2 <= self.crop_height_px <= H - self.crop_top_px:
+            raise ValueError(f"crop_height_px must be in [2, {H} − crop_top_px = "
+                             f"{H - self.crop_top_px}], got "
                              f"{self.crop_height_px}; lower it or move crop_top_px up")
         if not 0.0 <= self.binarise_level <= 1.0:
             raise ValueError(f"binarise_level must be in [0, 1] (fraction of full scale), got "
@@ -253,11 +321,11 @@ class HoughConfig:
                 raise ValueError(f"car_mask[{k}] must be four integers (row_start, row_stop, "
                                  f"col_start, col_stop), got {r!r}")
             r0, r1, c0, c1 = (int(v) for v in r)
-            if not (0 <= r0 < r1 <= self.crop_height_px and 0 <= c0 < c1 <= IMAGE_WIDTH_PX):
+            if not (0 <= r0 < r1 <= self.crop_height_px and 0 <= c0 < c1 <= self.image_width_px):
                 raise ValueError(
                     f"car_mask[{k}] = {r!r} must satisfy 0 ≤ row_start < row_stop ≤ "
                     f"crop_height_px = {self.crop_height_px} and 0 ≤ col_start < col_stop ≤ "
-                    f"{IMAGE_WIDTH_PX} (0-based, half-open crop coordinates; a Matlab "
+                    f"{self.image_width_px} (0-based, half-open crop coordinates; a Matlab "
                     "range a:b is a − 1, b)")
             out.append((r0, r1, c0, c1))
         return tuple(out)
@@ -712,7 +780,7 @@ class HoughDetector:
         self.config = config or HoughConfig()
         c = self.config
         self.theta_deg = theta_grid(c.theta_min_deg, c.theta_max_deg, c.theta_step_deg)
-        self.rho_px = rho_grid((c.crop_height_px, IMAGE_WIDTH_PX), c.rho_resolution_px)
+        self.rho_px = rho_grid((c.crop_height_px, c.image_width_px), c.rho_resolution_px)
         self._cos, self._sin = _trig(self.theta_deg)
         for a in (self.theta_deg, self.rho_px, self._cos, self._sin):
             a.flags.writeable = False
@@ -725,7 +793,7 @@ class HoughDetector:
     def detect(self, frame: np.ndarray) -> HoughResult:
         """The seed's steps on one (480, 752) uint8 grey frame."""
         c = self.config
-        frame = check_frame(frame, IMAGE_WIDTH_PX, IMAGE_HEIGHT_PX)
+        frame = check_frame(frame, c.image_width_px, c.image_height_px)
         crop = frame[c.crop_top_px:c.crop_top_px + c.crop_height_px]
         binary = binarise(crop, c.binarise_level)
         masked = apply_car_mask(binary, c.car_mask)
