@@ -3,6 +3,7 @@ reference frames of another team's car through the ``reference-car`` profile."""
 
 from __future__ import annotations
 
+import itertools
 import json
 from pathlib import Path
 
@@ -72,7 +73,7 @@ def test_hough_finds_the_ego_lanes_two_lines_on_real_frames(name: str) -> None:
         (marking,) = [m for m in doc["markings"] if m.get("boundary") == side]
         mask = np.zeros_like(truth.labels)  # this boundary alone, in its labelled width
         pts = np.array(marking["points"])
-        for (u0, v0, w0), (u1, v1, w1) in zip(pts[:-1], pts[1:], strict=True):
+        for (u0, v0, w0), (u1, v1, w1) in itertools.pairwise(pts):
             cv2.line(mask, (round(u0), round(v0)), (round(u1), round(v1)), 1,
                      max(1, round((w0 + w1) / 2)))
         dist = truth_distance(mask, (Marking.RIGHT_LINE,))  # label 1: the boundary
