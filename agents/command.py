@@ -11,6 +11,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from tfalda_sim.camera.command import add_camera_option, camera_input
 from tfalda_sim.cli_common import (
     DIRECTORY,
     CliError,
@@ -30,6 +31,8 @@ from tfalda_sim.cli_common import (
     workers_arg_value,
 )
 from tfalda_sim.interrupts import ignoring_stops
+from tfalda_sim.perception.command import check_camera_geometry
+from tfalda_sim.perception.geometry import CameraGeometryError
 from tfalda_sim.tracks import NAMED_TRACKS, generate, load_named
 from tfalda_sim.vehicle import MIN_CRUISE_SPEED_M_S, CarParams
 
@@ -66,6 +69,7 @@ def _drive_parser(sub: Any) -> None:
     dr.add_argument("--video", type=Path, help="MP4 of the drive with ROIs, lanes and a map")
     dr.add_argument("--camera-video", type=Path,
                     help="MP4 of the bare grey camera frames (for tfalda-sim replay)")
+    add_camera_option(dr)
     add_force_option(dr, "existing videos")
     add_json_option(dr)
     dr.set_defaults(func=cmd_drive)
@@ -76,7 +80,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
 
     check_outputs({"video": args.video, "camera-video": args.camera_video},
                   {"video": ".mp4", "camera-video": ".mp4"}, args.force,
-                  inputs={"policy": args.policy})
+                  inputs={"policy": args.policy, "camera": camera_input(args.camera)})
+    camera = check_camera_geometry(args.camera)
     if args.track in NAMED_TRACKS:
         track, label = load_named(args.track), args.track
     elif args.track.isascii() and args.track.isdigit():
@@ -89,14 +94,18 @@ def cmd_drive(args: argparse.Namespace) -> int:
     if not track.closed:
         raise CliError(f"--track {args.track} is not a loop; laps need a closed track")
     try:
-        agent = make_agent(args.agent, args.policy)
+        agent = make_agent(args.agent, args.policy, camera)
     except (ValueError, FileNotFoundError, ImportError) as exc:
         raise CliError(str(exc)) from None
-    result = drive(agent, track, laps=args.laps, speed_m_s=args.speed,
-                   recover=not args.no_recover, video=args.video,
-                   camera_video=args.camera_video, label=label,
-                   progress=not args.json)
-    summary = result.summary() | {"agent": args.agent, "speed_m_s": args.speed}
+    try:
+        result = drive(agent, track, laps=args.laps, speed_m_s=args.speed,
+                       recover=not args.no_recover, video=args.video,
+                       camera_video=args.camera_video, label=label,
+                       progress=not args.json, camera=camera)
+    except CameraGeometryError as exc:
+        raise CliError(f"--camera {args.camera}: {exc}") from None
+    summary = result.summary() | {"agent": args.agent, "speed_m_s": args.speed,
+                                  "camera": args.camera}
     if args.video:
         summary["video"] = str(args.video)
     if args.camera_video:
@@ -145,6 +154,7 @@ def _train_parser(sub: Any) -> None:
                     help="write into a folder that holds an earlier run: its policy.zip, "
                          "train.json and same-named checkpoints are replaced, its TensorBoard "
                          "runs kept beside the new one")
+    add_camera_option(tr)
     add_json_option(tr)
     tr.set_defaults(func=cmd_train)
 
@@ -160,7 +170,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     from .train import OUT_FILES, train
 
     check_outputs({"out": args.out}, {"out": DIRECTORY}, args.force,
-                  files_in={"out": OUT_FILES})
+                  files_in={"out": OUT_FILES}, inputs={"camera": camera_input(args.camera)})
+    check_camera_geometry(args.camera)
     mem = available_memory_bytes()
     if args.n_envs > 1 and mem is not None and args.n_envs * WORKER_MEMORY_BYTES > mem:
         raise CliError(f"--n-envs {args.n_envs} needs about "
@@ -168,7 +179,7 @@ def cmd_train(args: argparse.Namespace) -> int:
                        f"{mem / 2**30:.1f} GiB is available; use at most "
                        f"{max(1, mem // WORKER_MEMORY_BYTES)}")
     summary = train(args.timesteps, args.n_envs, args.seed, args.out, speed_m_s=args.speed,
-                    progress=not args.json)
+                    progress=not args.json, camera=args.camera)
     print(json.dumps(summary) if args.json else
           f"trained {summary['timesteps_done']} steps in {summary['train_time_s']:.0f} s → "
           f"{args.out / 'policy.zip'}")
@@ -195,6 +206,7 @@ def _stress_parser(sub: Any) -> None:
     add_workers_option(st)
     st.add_argument("--out", type=Path, default=Path("out/stress"),
                     help="folder for stress.jsonl, stress.json, stress.md and stress.png")
+    add_camera_option(st)
     add_force_option(st, "an earlier report in --out")
     add_json_option(st)
     st.set_defaults(func=cmd_stress)
@@ -218,7 +230,9 @@ def cmd_stress(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise CliError(str(exc)) from None
     check_outputs({"out": args.out}, {"out": DIRECTORY}, args.force,
-                  files_in={"out": REPORT_FILES.values()})
+                  files_in={"out": REPORT_FILES.values()},
+                  inputs={"camera": camera_input(args.camera)})
+    check_camera_geometry(args.camera)
     jobs = len(args.seeds) * len(faults) * 2
     workers = workers_arg_value(args.workers, jobs)
     tally = StressTally()
@@ -233,7 +247,8 @@ def cmd_stress(args: argparse.Namespace) -> int:
                 tally.add(run)
                 bar.update()
 
-            end = consume(iter_battery(args.seeds, faults, workers=workers), keep)
+            end = consume(iter_battery(args.seeds, faults, workers=workers,
+                                       camera=args.camera), keep)
         rows = tally.rows()
         if not rows:
             outs.abort()
@@ -279,6 +294,7 @@ def _evaluate_agent_parser(sub: Any) -> None:
     ev.add_argument("--speeds", type=_speeds_arg, default=(1.5,),
                     help="comma-separated cruise speeds [m/s], each in (0, top speed]")
     add_workers_option(ev)
+    add_camera_option(ev)
     ev.add_argument("--out", type=Path, help="also write the JSON here")
     add_force_option(ev, "an existing --out")
     add_json_option(ev)
@@ -292,7 +308,8 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
     from .evaluate import evaluate
 
     check_outputs({"out": args.out}, {"out": ".json"}, args.force,
-                  inputs={"policy": args.policy})
+                  inputs={"policy": args.policy, "camera": camera_input(args.camera)})
+    check_camera_geometry(args.camera)
     try:
         make_agent(args.agent, args.policy)
     except (ValueError, FileNotFoundError, ImportError) as exc:
@@ -301,7 +318,7 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
     workers = workers_arg_value(args.workers, jobs)
     result = evaluate(args.agent, args.seeds, laps=args.laps, speeds=args.speeds,
                       policy=None if args.policy is None else str(args.policy),
-                      workers=workers, progress=not args.json)
+                      workers=workers, progress=not args.json, camera=args.camera)
     end = SweepEnd(interrupted=result["interrupted"], worker_died=result["worker_died"])
     if not result["runs"]:
         return sweep_exit(end, "no run had finished; nothing written")

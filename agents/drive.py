@@ -19,7 +19,7 @@ from typing import Any, Protocol
 import numpy as np
 from tqdm import tqdm
 
-from tfalda_sim.camera import FRAME_RATE_HZ
+from tfalda_sim.camera import Camera
 from tfalda_sim.envs import TfaldaTrackEnv
 from tfalda_sim.interrupts import INTERRUPTS, is_interrupt
 from tfalda_sim.tracks import Track
@@ -67,12 +67,14 @@ DEFAULT_POLICY = Path(__file__).resolve().parent / "policies" / "ppo.zip"
 """The committed PPO policy (see docs/agents.md for the command that trained it)."""
 
 
-def make_agent(kind: str, policy: str | Path | None = None) -> Agent:
-    """``"pid"`` or ``"ppo"`` (from ``policy``, default ``DEFAULT_POLICY``)."""
+def make_agent(kind: str, policy: str | Path | None = None, camera: Camera | None = None
+               ) -> Agent:
+    """``"pid"`` (back-projecting through ``camera``, default the thesis') or ``"ppo"``
+    (from ``policy``, default ``DEFAULT_POLICY``)."""
     if kind == "pid":
         if policy is not None:
             raise ValueError("--policy is for the ppo agent only")
-        return LanePid()
+        return LanePid(camera=camera)
     if kind == "ppo":
         return PpoAgent(policy or DEFAULT_POLICY)
     raise ValueError(f"unknown agent {kind!r}; use pid or ppo")
@@ -106,23 +108,27 @@ class DriveResult:
 def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
           recover: bool = True, video: Path | None = None, camera_video: Path | None = None,
           max_steps: int | None = None,
-          label: str = "", progress: bool = False, env: TfaldaTrackEnv | None = None
-          ) -> DriveResult:
+          label: str = "", progress: bool = False, env: TfaldaTrackEnv | None = None,
+          camera: Camera | str = "thesis") -> DriveResult:
     """Drive ``laps`` laps of ``track`` from its start line at ``speed_m_s``. ``video``
     records the visualiser (lanes, ROIs, map), ``camera_video`` the bare grey camera
     frames (for ``tfalda-sim replay``). A Ctrl-C ends the drive early (``ended ==
-    "interrupted"``) and keeps the videos of the frames driven so far."""
+    "interrupted"``) and keeps the videos of the frames driven so far. ``camera``: the
+    car's camera (a profile name, file or camera) when no ``env`` is given."""
     if laps < 1:
         raise ValueError(f"laps must be ≥ 1, got {laps}")
     if not track.closed:
         raise ValueError(f"{track.name or 'the track'} is not a loop: laps need a closed track")
     if video and camera_video and Path(video).resolve() == Path(camera_video).resolve():
         raise ValueError("video and camera_video name the same file; give each its own")
-    env = env or TfaldaTrackEnv(track=track, speed_m_s=speed_m_s,
+    env = env or TfaldaTrackEnv(track=track, speed_m_s=speed_m_s, camera=camera,
                                 render_mode="rgb_array" if video else None)
+    rate_hz = env.camera.frame_rate_hz
+    if isinstance(agent, LanePid) and agent.camera is not env.camera:
+        agent.use_camera(env.camera)  # the PID back-projects through the car's camera
     lane = -0.5 * track.lane_width_m
     start_s = track.start_line_s_m or 0.0
-    steps_budget = max_steps or int(3 * laps * track.length_m / speed_m_s * FRAME_RATE_HZ)
+    steps_budget = max_steps or int(3 * laps * track.length_m / speed_m_s * rate_hz)
     obs, info = env.reset(seed=0, options={"track": track, "start": (start_s, lane, 0.0),
                                            "speed_m_s": speed_m_s})
     agent.reset()
@@ -135,8 +141,8 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
     t0 = time.perf_counter()
     # The writers replace an existing file only when the drive ends without an error.
     with contextlib.ExitStack() as stack:
-        writer = stack.enter_context(VideoWriter(video, FRAME_RATE_HZ)) if video else None
-        camera_writer = (stack.enter_context(VideoWriter(camera_video, FRAME_RATE_HZ))
+        writer = stack.enter_context(VideoWriter(video, rate_hz)) if video else None
+        camera_writer = (stack.enter_context(VideoWriter(camera_video, rate_hz))
                          if camera_video else None)
         bar = stack.enter_context(tqdm(total=laps, desc=label or "laps",
                                        disable=not progress, unit="lap"))
@@ -155,7 +161,7 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
                 # Distance over all episodes of the drive (a recovery starts a new episode).
                 lap_now = math.floor((distance + info["distance_m"]) / total)
                 while len(lap_times) < lap_now:
-                    lap_times.append(steps / FRAME_RATE_HZ - math.fsum(lap_times))
+                    lap_times.append(steps / rate_hz - math.fsum(lap_times))
                     bar.update(1)
                 if len(lap_times) >= laps:
                     ended = "laps"

@@ -18,18 +18,22 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from tfalda_sim.camera import load_camera
 from tfalda_sim.cli_common import consume
 from tfalda_sim.parallel import resolve_workers, stream
 from tfalda_sim.tracks import generate
 
 from .drive import drive, make_agent
 
+Job = tuple[str, str | None, int, int, float, str]
 
-def _one(job: tuple[str, str | None, int, int, float]) -> dict[str, Any]:
-    kind, policy, seed, laps, speed = job
+
+def _one(job: Job) -> dict[str, Any]:
+    kind, policy, seed, laps, speed, camera_spec = job
     track = replace(generate(seed), obstacles=())  # lane keeping: no cartons to avoid
-    result = drive(make_agent(kind, policy), track, laps=laps, speed_m_s=speed,
-                   recover=False, label=f"seed {seed}")
+    camera = load_camera(camera_spec)
+    result = drive(make_agent(kind, policy, camera), track, laps=laps, speed_m_s=speed,
+                   recover=False, label=f"seed {seed}", camera=camera)
     if result.ended == "interrupted":  # drive() stops at Ctrl-C; the sweep must stop too
         raise KeyboardInterrupt
     return {"seed": seed, "speed_m_s": speed, "success": result.laps_completed == laps,
@@ -37,18 +41,19 @@ def _one(job: tuple[str, str | None, int, int, float]) -> dict[str, Any]:
 
 
 def _jobs(kind: str, policy: str | None, seeds: range, laps: int,
-          speeds: tuple[float, ...]) -> Iterator[tuple[str, str | None, int, int, float]]:
+          speeds: tuple[float, ...], camera: str) -> Iterator[Job]:
     for speed in speeds:
         for seed in seeds:
-            yield kind, policy, seed, laps, speed
+            yield kind, policy, seed, laps, speed, camera
 
 
 def iter_evaluate(kind: str, seeds: range, *, laps: int = 3,
                   speeds: tuple[float, ...] = (1.5,), policy: str | None = None,
-                  workers: int = 1) -> Iterator[dict[str, Any]]:
-    """One run per (speed, seed), streamed from ``workers`` processes in that order."""
-    make_agent(kind, policy)  # fail early on a bad agent or policy
-    yield from stream(_one, _jobs(kind, policy, seeds, laps, speeds), workers=workers)
+                  workers: int = 1, camera: str = "thesis") -> Iterator[dict[str, Any]]:
+    """One run per (speed, seed), streamed from ``workers`` processes in that order;
+    ``camera`` a profile name or file (the workers load it)."""
+    make_agent(kind, policy, load_camera(camera))  # fail early on a bad agent or camera
+    yield from stream(_one, _jobs(kind, policy, seeds, laps, speeds, camera), workers=workers)
 
 
 def summarise(runs: list[dict[str, Any]], speeds: tuple[float, ...]) -> list[dict[str, Any]]:
@@ -71,7 +76,8 @@ def summarise(runs: list[dict[str, Any]], speeds: tuple[float, ...]) -> list[dic
 
 
 def evaluate(kind: str, seeds: range, *, laps: int = 3, speeds: tuple[float, ...] = (1.5,),
-             policy: str | None = None, workers: int | None = None, progress: bool = True
+             policy: str | None = None, workers: int | None = None, progress: bool = True,
+             camera: str = "thesis"
              ) -> dict[str, Any]:
     """Drive every seed at every speed; per speed the success rate and figures. A Ctrl-C
     ends it early with the runs finished so far (``"interrupted": true``), as does a
@@ -85,7 +91,8 @@ def evaluate(kind: str, seeds: range, *, laps: int = 3, speeds: tuple[float, ...
             bar.update()
 
         end = consume(iter_evaluate(kind, seeds, laps=laps, speeds=speeds, policy=policy,
-                                    workers=n), keep)
-    return {"agent": kind, "policy": policy, "laps": laps, "seeds": [seeds.start, seeds.stop],
+                                    workers=n, camera=camera), keep)
+    return {"agent": kind, "policy": policy, "camera": camera, "laps": laps,
+            "seeds": [seeds.start, seeds.stop],
             "speeds": summarise(runs, speeds), "runs": runs, "interrupted": end.interrupted,
             "worker_died": end.worker_died}

@@ -35,9 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tfalda_sim.camera import FRAME_RATE_HZ, FisheyeCamera
+from tfalda_sim.camera import Camera, FisheyeCamera
 from tfalda_sim.envs.observation import LaneVector, read_lane_vector
-from tfalda_sim.perception.params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX
 from tfalda_sim.tracks.dimensions import LANE_WIDTH_M
 from tfalda_sim.tracks.rules import min_centre_radius_m
 from tfalda_sim.vehicle import CarParams
@@ -102,13 +101,19 @@ class LanePid:
     """``act(obs)`` → action, for ``TfaldaTrack-v0``'s "lanes" observations (or the
     ``"lanes"`` entry of a dict observation); ``reset()`` at every episode start."""
 
-    def __init__(self, gains: PidGains | None = None, *, camera: FisheyeCamera | None = None,
-                 car: CarParams | None = None, frame_rate_hz: float = FRAME_RATE_HZ) -> None:
+    def __init__(self, gains: PidGains | None = None, *, camera: Camera | None = None,
+                 car: CarParams | None = None, frame_rate_hz: float | None = None) -> None:
         self.gains = gains or PidGains()
         self.camera = camera or FisheyeCamera.default()
         self.car = car or CarParams()
-        self.dt_s = 1.0 / frame_rate_hz
+        self.dt_s = 1.0 / (frame_rate_hz or self.camera.frame_rate_hz)  # the camera's by default
         self.reset()
+
+    def use_camera(self, camera: Camera) -> None:
+        """Back-project through ``camera`` (and step at its frame rate) from now on: the
+        drive hands the env's camera to the PID."""
+        self.camera = camera
+        self.dt_s = 1.0 / camera.frame_rate_hz
 
     def reset(self) -> None:
         self._integral = 0.0
@@ -118,7 +123,8 @@ class LanePid:
 
     def read(self, obs: np.ndarray | dict[str, np.ndarray]) -> LaneVector:
         """The observation decoded (``tfalda_sim.envs.observation.read_lane_vector``)."""
-        return read_lane_vector(obs, image_width=IMAGE_WIDTH_PX, image_height=IMAGE_HEIGHT_PX)
+        return read_lane_vector(obs, image_width=self.camera.width,
+                                image_height=self.camera.height)
 
     def lane_geometry(self, obs: np.ndarray | LaneVector) -> tuple[np.ndarray, np.ndarray]:
         """Per ROI row (top first): the lane centre ``(R, 2)`` and unit direction

@@ -127,8 +127,10 @@ def _track_for(seed: int, fault: str, s_onset: float) -> Track:
     return track
 
 
-def run_one(seed: int, fault: str, roi_reset_stage: bool) -> StressRun:
-    """One closed-loop drive with ``fault`` on generated track ``seed``."""
+def run_one(seed: int, fault: str, roi_reset_stage: bool, camera: str = "thesis"
+            ) -> StressRun:
+    """One closed-loop drive with ``fault`` on generated track ``seed`` by a car with
+    ``camera`` (a profile name or file)."""
     case = FAULTS[fault]
     base = replace(generate(seed), obstacles=())
     speed = FAST_CURVE_SPEED_M_S if fault == "fast_curve" else SPEED_M_S
@@ -142,11 +144,11 @@ def run_one(seed: int, fault: str, roi_reset_stage: bool) -> StressRun:
     cfg = DetectorConfig.thesis()
     if not roi_reset_stage:
         cfg = replace(cfg, lis=replace(cfg.lis, roi_reset=False))
-    env = TfaldaTrackEnv(track=track, speed_m_s=speed, detector=cfg,
+    env = TfaldaTrackEnv(track=track, speed_m_s=speed, detector=cfg, camera=camera,
                          obstacles=fault == "obstacle")
     obs, _ = env.reset(seed=seed, options={"start": (start_s, -0.5 * track.lane_width_m, 0.0),
                                            "faults": case.make(s_onset)})
-    pid = LanePid()
+    pid = LanePid(camera=env.camera)
     end = ONSET_STEP + case.duration
     steps = end + AFTER_STEPS
     hits, resets = [], []
@@ -185,7 +187,7 @@ def _tightest_curve_start(track: Track) -> float:
     return float(t.s0[k])
 
 
-def _run(args: tuple[int, str, bool]) -> StressRun:
+def _run(args: tuple[int, str, bool, str]) -> StressRun:
     return run_one(*args)
 
 
@@ -199,21 +201,23 @@ def check_faults(faults: Sequence[str] | None) -> list[str]:
     return names
 
 
-def battery_jobs(seeds: Iterable[int], faults: Sequence[str]) -> Iterator[tuple[int, str, bool]]:
-    """(seed, fault, reset stage) for every run, seed by seed: a long range interrupted
-    early has every fault of the seeds it reached, and the jobs are never all in memory."""
+def battery_jobs(seeds: Iterable[int], faults: Sequence[str], camera: str = "thesis"
+                 ) -> Iterator[tuple[int, str, bool, str]]:
+    """(seed, fault, reset stage, camera) for every run, seed by seed: a long range
+    interrupted early has every fault of the seeds it reached, and the jobs are never all
+    in memory."""
     for seed in seeds:
         for fault in faults:
             for stage in (True, False):
-                yield int(seed), fault, stage
+                yield int(seed), fault, stage, camera
 
 
 def iter_battery(seeds: Iterable[int], faults: Sequence[str] | None = None, *,
-                 workers: int = 1) -> Iterator[StressRun]:
+                 workers: int = 1, camera: str = "thesis") -> Iterator[StressRun]:
     """Every fault × {with, without the reset stage} × seed, streamed from a process pool
     of ``workers`` (``tfalda_sim.parallel.stream``: bounded memory for any range, results
     in job order and independent of the worker count)."""
-    yield from stream(_run, battery_jobs(seeds, check_faults(faults)), workers=workers)
+    yield from stream(_run, battery_jobs(seeds, check_faults(faults), camera), workers=workers)
 
 
 def run_battery(seeds: Sequence[int], faults: Sequence[str] | None = None, *,

@@ -52,10 +52,10 @@ class PpoConfig:
 
 
 def env_kwargs(speed_m_s: float = TRAIN_SPEED_M_S, seeds: tuple[int, int] = TRAIN_SEEDS,
-               track: str | int | None = None) -> dict[str, Any]:
+               track: str | int | None = None, camera: str = "thesis") -> dict[str, Any]:
     """Arguments of the training env: a new generated track each reset from ``seeds``
-    (or always ``track``)."""
-    return {"track": track, "track_seeds": seeds, "speed_m_s": speed_m_s}
+    (or always ``track``), seen by ``camera`` (a profile name or file)."""
+    return {"track": track, "track_seeds": seeds, "speed_m_s": speed_m_s, "camera": camera}
 
 
 OUT_FILES: tuple[str, ...] = ("policy.zip", "train.json", "tb/", "checkpoints/")
@@ -144,9 +144,11 @@ def _existing_ancestor(path: Path) -> Path:
 
 def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfig | None = None,
           speed_m_s: float = TRAIN_SPEED_M_S, progress: bool = True,
-          subprocess: bool = True, track: str | int | None = None) -> dict[str, Any]:
+          subprocess: bool = True, track: str | int | None = None, camera: str = "thesis"
+          ) -> dict[str, Any]:
     """Train PPO and save it under ``out``; returns the summary written to train.json.
-    ``track`` fixes the track (default: the generated ``TRAIN_SEEDS``).
+    ``track`` fixes the track (default: the generated ``TRAIN_SEEDS``); ``camera`` is the
+    car's camera (a profile name or file).
 
     The run is written to a staging folder beside ``out`` and moved into ``out`` when it
     ends: an error leaves ``out`` as it was. A Ctrl-C ends the training early and keeps
@@ -166,7 +168,7 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
     try:
         vec_cls = SubprocVecEnv if subprocess and n_envs > 1 else DummyVecEnv
         venv = make_vec_env(_make_env, n_envs=n_envs, seed=seed, vec_env_cls=vec_cls,
-                            env_kwargs=env_kwargs(speed_m_s, track=track))
+                            env_kwargs=env_kwargs(speed_m_s, track=track, camera=camera))
         interrupted = False
         try:
             model = PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size,
@@ -200,7 +202,8 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
                 _stop_workers(venv)
             else:
                 venv.close()
-        summary = _summary(timesteps, n_envs, seed, speed_m_s, track, cfg, elapsed, out)
+        summary = _summary(timesteps, n_envs, seed, speed_m_s, track, cfg, elapsed, out,
+                           camera)
         summary.update(interrupted=interrupted, timesteps_done=int(model.num_timesteps))
         (staging / "train.json").write_text(json.dumps(summary, indent=2))
         _publish_run(staging, out)
@@ -211,9 +214,10 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
 
 
 def _summary(timesteps: int, n_envs: int, seed: int, speed_m_s: float,
-             track: str | int | None, cfg: PpoConfig, elapsed: float, out: Path
-             ) -> dict[str, Any]:
+             track: str | int | None, cfg: PpoConfig, elapsed: float, out: Path,
+             camera: str = "thesis") -> dict[str, Any]:
     return {"timesteps": timesteps, "n_envs": n_envs, "seed": seed, "speed_m_s": speed_m_s,
+            "camera": camera,
                "track": track, "train_seeds": list(TRAIN_SEEDS), "config": cfg.__dict__ | {
                    "net_arch": list(cfg.net_arch)},
                "train_time_s": elapsed, "cores": os.cpu_count(),
@@ -221,4 +225,5 @@ def _summary(timesteps: int, n_envs: int, seed: int, speed_m_s: float,
                # The CLI command that repeats this run (train()'s own arguments).
                "command": (f"tfalda-sim train --timesteps {timesteps} --n-envs {n_envs} "
                            f"--seed {seed} --speed {speed_m_s:g} --out {out}"
+                           + (f" --camera {camera}" if camera != "thesis" else "")
                            + (f"  (Python: track={track!r})" if track is not None else ""))}

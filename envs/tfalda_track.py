@@ -9,6 +9,7 @@ the reward comes from the track geometry. Every stage lives in ``tfalda_sim`` an
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, fields, replace
 from enum import Enum
@@ -19,7 +20,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from tfalda_sim.camera import FRAME_RATE_HZ, FisheyeCamera
+from tfalda_sim.camera import FRAME_RATE_HZ, NAMED_CAMERAS, Camera, load_camera
 from tfalda_sim.evaluation.geometric import geometric_hit_rates
 from tfalda_sim.faults import Fault, FaultInjector
 from tfalda_sim.perception import DetectorConfig, LaneObservation, TfaldaDetector
@@ -133,6 +134,16 @@ def resolve_track(spec: TrackSpec, obstacles: bool) -> Track:
     raise TypeError(f"track must be {accepted}, got {show(spec)}")
 
 
+def resolve_camera(spec: object) -> Camera:
+    """A ``Camera``, a profile name or a camera file; a clear error otherwise."""
+    if isinstance(spec, Camera):
+        return spec
+    if not isinstance(spec, (str, os.PathLike)):
+        raise TypeError(f"camera must be a profile name ({', '.join(NAMED_CAMERAS)}), a camera "
+                        f"file or a tfalda_sim.camera.Camera, got {show(spec)}")
+    return load_camera(spec)
+
+
 def resolve_detector(spec: object) -> DetectorConfig:
     """A ``DetectorConfig``, a name of ``DETECTOR_PRESETS`` or None (the thesis')."""
     if spec is None:
@@ -234,6 +245,12 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
     ``effects``: the ``Effects`` without randomisation. ``detector``: the
     TFALDA + LIS configuration, a ``DetectorConfig`` or a preset name: ``"thesis"`` (the
     default), ``"improved"`` or ``"without_lis"`` (``DetectorConfig``'s classmethods).
+    ``camera``: the car's camera — a profile name (``"thesis"``, the default, or
+    ``"reference-car"``), a profile or calibration-plus-mount file, or a
+    ``tfalda_sim.camera.Camera`` (any lens model and image size; the observation's image
+    and the step rate follow it). On a camera other than the thesis', a preset or a
+    ``DetectorConfig`` with the thesis' pixel layout gets its geometry derived for the
+    camera (``DetectorConfig.for_camera``); a camera that cannot see the lane is refused.
     ``car``: ``CarParams``. ``reward``: ``RewardWeights``. ``max_laps``: an int ≥ 0, 0 =
     no limit (floats are refused, even 2.0). ``faults``: a default fault schedule for
     every episode, a list or tuple of ``tfalda_sim.faults`` faults.
@@ -259,6 +276,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
                  randomization: DomainRandomization | None = None,
                  effects: Effects | None = None,
                  detector: DetectorConfig | str | None = None,
+                 camera: Camera | str | os.PathLike[str] = "thesis",
                  car: CarParams | None = None, reward: RewardWeights | None = None,
                  max_laps: int = 0, faults: Sequence[Fault] = ()) -> None:
         if render_mode is not None:
@@ -291,10 +309,14 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         if track is not None:
             resolve_track(track, self.obstacles)  # fail early on a bad track
 
-        self.camera = FisheyeCamera.default()
+        self.camera = resolve_camera(camera)
+        self.detector_config = self.detector_config.on_camera(self.camera)
         layout = self.detector_config.layout
         if (layout.image_width, layout.image_height) != (self.camera.width, self.camera.height):
-            raise ValueError("the detector's image size must be the camera's 752×480")
+            raise ValueError(f"the detector's image size {layout.image_width}×"
+                             f"{layout.image_height} must be the camera's {self.camera.width}×"
+                             f"{self.camera.height}: use DetectorConfig.for_camera(camera)")
+        self.metadata = {**self.metadata, "render_fps": self.camera.frame_rate_hz}
         self.action_space = spaces.Box(-1.0, 1.0, (2 if self.throttle else 1,), np.float32)
         low, high = lane_vector_bounds(layout.rows)
         lanes_space = spaces.Box(low, high, dtype=np.float32)
@@ -354,7 +376,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         fault_rng = np.random.default_rng(int(rng.integers(2**63)))
 
         if self._world is None or self._track != track:
-            self._world = World(track, self.car)
+            self._world = World(track, self.car, frame_rate_hz=self.camera.frame_rate_hz)
             self._map = None
         self._track = track
         self._faults = FaultInjector(faults, fault_rng)

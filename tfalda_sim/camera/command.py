@@ -89,6 +89,12 @@ def add_camera_option(parser: argparse.ArgumentParser) -> None:
                              + " or a profile file (default: thesis)")
 
 
+def camera_input(text: str) -> Path | None:
+    """The file ``--camera`` reads (for the output check: never overwritten), or None
+    for a named profile."""
+    return None if text in NAMED_CAMERAS else Path(text)
+
+
 def resolve_camera_arg(text: str) -> Camera:
     """The camera of ``--camera``; a clear ``CliError`` for a bad name or file."""
     try:

@@ -35,10 +35,12 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from ..camera import Camera, load_camera
 from ..histogram import TimeHistogram
 from ..parallel import resolve_workers, stream
 from ..perception import DetectorConfig, HoughConfig, HoughDetector, LaneObservation
-from ..perception.params import INITIAL_ROIS
+from ..perception.hough import SIMULATOR_BINARISE_LEVEL
+from ..perception.params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX, INITIAL_ROIS, is_thesis_camera
 from ..rendering import FrameTruth, Renderer
 from .metrics import (
     EPSILON_PX,
@@ -72,15 +74,31 @@ MIN_VISIBLE_ROWS: int = 20
 band [px]."""
 
 
-def hough_detectors() -> dict[str, HoughConfig]:
+def hough_detectors(camera: Camera | None = None) -> dict[str, HoughConfig]:
     """The Hough runs of the comparison: the seed's numbers as they are, and the simulator
-    preset (the binarising level of our markings, our car's bonnet as the mask)."""
-    return {HOUGH_SEED: HoughConfig(), HOUGH_SIMULATOR: HoughConfig.simulator()}
+    preset (the binarising level of our markings, our car's bonnet as the mask; on another
+    camera its crop and mask derived, ``HoughConfig.for_camera``). The seed's numbers run
+    only on a 752×480 camera (they are rows and columns of one)."""
+    if camera is None or is_thesis_camera(camera):
+        return {HOUGH_SEED: HoughConfig(), HOUGH_SIMULATOR: HoughConfig.simulator()}
+    out = {HOUGH_SIMULATOR: HoughConfig.for_camera(camera, SIMULATOR_BINARISE_LEVEL)}
+    if (camera.width, camera.height) == (IMAGE_WIDTH_PX, IMAGE_HEIGHT_PX):
+        out = {HOUGH_SEED: HoughConfig(), **out}
+    return out
 
 
-def tfalda_detectors() -> dict[str, DetectorConfig]:
-    """The TFALDA runs: the thesis' configuration with and without the LIS."""
-    return {TFALDA_LIS: DetectorConfig.thesis(), TFALDA_NO_LIS: DetectorConfig.without_lis()}
+def tfalda_detectors(camera: Camera | None = None) -> dict[str, DetectorConfig]:
+    """The TFALDA runs: the thesis' configuration with and without the LIS (on another
+    camera with its derived geometry)."""
+    configs = {TFALDA_LIS: DetectorConfig.thesis(), TFALDA_NO_LIS: DetectorConfig.without_lis()}
+    return configs if camera is None else {k: c.on_camera(camera) for k, c in configs.items()}
+
+
+def band_rows(config: DetectorConfig) -> tuple[int, int]:
+    """Image rows [first, stop) [px] of a configuration's ROI band (``BAND_ROWS`` for the
+    thesis layout)."""
+    table = config.layout.table_px
+    return min(r[1] for r in table), max(r[1] + r[3] for r in table)
 
 
 @dataclass(frozen=True)
@@ -115,19 +133,21 @@ def _follows(line: np.ndarray, boundary: np.ndarray) -> bool:
 
 
 def score_lines(lines: np.ndarray, truth: FrameTruth, distance: np.ndarray | None = None, *,
-                epsilon_px: float = EPSILON_PX) -> LineScore:
+                epsilon_px: float = EPSILON_PX, band: tuple[int, int] = BAND_ROWS
+                ) -> LineScore:
     """Score a frame's lines ``(N, 4)`` [px]; rows with a non-finite value are no line.
-    Pass ``distance`` (``truth_distance(truth.labels)``) to reuse it."""
+    Pass ``distance`` (``truth_distance(truth.labels)``) to reuse it; ``band``: the rows
+    [first, stop) in which an ego boundary counts as visible."""
     lines = np.asarray(lines, np.float64).reshape(-1, 4)
     lines = lines[np.all(np.isfinite(lines), axis=1)]
     if distance is None:
         distance = truth_distance(truth.labels)
     hits = lane_hit_rates(lines, distance, epsilon_px)
-    band = np.arange(*BAND_ROWS, dtype=np.float64)
+    rows = np.arange(*band, dtype=np.float64)
     visible = np.zeros(2, bool)
     found = np.zeros(2, bool)
     for k, boundary in enumerate((truth.left_boundary_px, truth.right_boundary_px)):
-        visible[k] = np.isfinite(boundary_x_at_rows(boundary, band)).sum() >= MIN_VISIBLE_ROWS
+        visible[k] = np.isfinite(boundary_x_at_rows(boundary, rows)).sum() >= MIN_VISIBLE_ROWS
         found[k] = visible[k] and any(_follows(line, boundary) for line in lines)
     return LineScore(hit_rates=hits, false_positive=hits < LANE_FAILURE_HIT_RATE,
                      ego_visible=visible, ego_found=found)
@@ -188,9 +208,11 @@ def compare_scenario(scenario: Scenario, *, renderer: Renderer | None = None,
                      tfalda: Mapping[str, DetectorConfig] | None = None,
                      epsilon_px: float = EPSILON_PX, progress: bool = False
                      ) -> dict[str, Tally]:
-    """Every detector on every frame of ``scenario``: a tally per detector label."""
-    hough = hough_detectors() if hough is None else dict(hough)
-    tfalda = tfalda_detectors() if tfalda is None else dict(tfalda)
+    """Every detector on every frame of ``scenario``: a tally per detector label (by
+    default the detectors of ``renderer``'s camera)."""
+    camera = renderer.camera if renderer is not None else None
+    hough = hough_detectors(camera) if hough is None else dict(hough)
+    tfalda = tfalda_detectors(camera) if tfalda is None else dict(tfalda)
     if not tfalda:
         raise ValueError("give at least one TFALDA configuration (the frames come from its "
                          "scenario runner)")
@@ -200,17 +222,20 @@ def compare_scenario(scenario: Scenario, *, renderer: Renderer | None = None,
     detectors = {label: HoughDetector(cfg) for label, cfg in hough.items()}
     tallies = {label: Tally() for label in (*tfalda, *hough)}
     scores: dict[str, list[LineScore]] = {label: [] for label in tfalda}
+    band = band_rows(next(iter(tfalda.values())))
 
     def on_frame(seq: int, frame: np.ndarray, truth: FrameTruth,
                  observations: Mapping[str, LaneObservation]) -> None:
         distance = truth_distance(truth.labels)
         for label, obs in observations.items():
-            scores[label].append(score_lines(obs.lanes, truth, distance, epsilon_px=epsilon_px))
+            scores[label].append(score_lines(obs.lanes, truth, distance, epsilon_px=epsilon_px,
+                                             band=band))
         for label, det in detectors.items():
             t0 = time.perf_counter()
             segments = det.detect(frame).segments
             dt = time.perf_counter() - t0
-            tallies[label].add(score_lines(segments, truth, distance, epsilon_px=epsilon_px), dt)
+            tallies[label].add(score_lines(segments, truth, distance, epsilon_px=epsilon_px,
+                                           band=band), dt)
 
     runs = run_scenario(scenario, tfalda, renderer=renderer, epsilon_px=epsilon_px,
                         progress=progress, on_frame=on_frame)
@@ -220,34 +245,34 @@ def compare_scenario(scenario: Scenario, *, renderer: Renderer | None = None,
     return tallies
 
 
-_RENDERER: Renderer | None = None
+_RENDERERS: dict[str, Renderer] = {}
 
 
-def _one(job: tuple[str, int | None, int | None]) -> tuple[str, dict[str, Tally]]:
-    global _RENDERER
-    if _RENDERER is None:  # one per worker process: its pixel geometry is costly
-        _RENDERER = Renderer()
-    kind, seed, max_frames = job
+def _one(job: tuple[str, int | None, int | None, str]) -> tuple[str, dict[str, Tally]]:
+    kind, seed, max_frames, camera = job
+    renderer = _RENDERERS.get(camera)
+    if renderer is None:  # one per camera and worker process: its pixel geometry is costly
+        renderer = _RENDERERS[camera] = Renderer(load_camera(camera))
     if seed is None:
         scenario = thesis_scenario(ScenarioKind(kind))
         group = kind
     else:
         scenario = generated_scenario(seed, max_frames=max_frames)
         group = "generated"
-    return group, compare_scenario(scenario, renderer=_RENDERER)
+    return group, compare_scenario(scenario, renderer=renderer)
 
 
-def compare_jobs(thesis: Sequence[str], seeds: Iterable[int], max_frames: int | None
-                 ) -> Iterator[tuple[str, int | None, int | None]]:
+def compare_jobs(thesis: Sequence[str], seeds: Iterable[int], max_frames: int | None,
+                 camera: str = "thesis") -> Iterator[tuple[str, int | None, int | None, str]]:
     """The comparison's jobs, generated as they are needed: the thesis scenarios, then
     one per generated track (never all in memory: ``seeds`` may be a huge range)."""
     for kind in thesis:
         if kind not in ("straight", "curve", "track"):
             raise ValueError(f"unknown thesis scenario {kind!r}; use straight, curve, track")
     for kind in thesis:
-        yield kind, None, None
+        yield kind, None, None, camera
     for seed in seeds:
-        yield "random", int(seed), max_frames
+        yield "random", int(seed), max_frames, camera
 
 
 class CompareTally:
@@ -276,10 +301,11 @@ class CompareTally:
 
 
 def iter_compare(thesis: Sequence[str], seeds: Iterable[int], *,
-                 max_frames: int | None = None, workers: int = 1
+                 max_frames: int | None = None, workers: int = 1, camera: str = "thesis"
                  ) -> Iterator[tuple[str, dict[str, Tally]]]:
-    """(group, tallies) per job, streamed from ``workers`` processes in job order."""
-    yield from stream(_one, compare_jobs(thesis, seeds, max_frames), workers=workers)
+    """(group, tallies) per job, streamed from ``workers`` processes in job order;
+    ``camera`` a profile name or file."""
+    yield from stream(_one, compare_jobs(thesis, seeds, max_frames, camera), workers=workers)
 
 
 def compare(thesis: Sequence[str] = ("straight", "curve", "track"),

@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from ..camera import load_camera
+from ..camera.command import add_camera_option, camera_input
 from ..cli_common import (
     DIRECTORY,
     CliError,
@@ -32,8 +34,9 @@ from ..cli_common import (
 )
 from ..interrupts import ignoring_stops
 from ..perception import DetectorConfig, LaneObservation
+from ..perception.command import check_camera_geometry
 from ..perception.params import IMAGE_WIDTH_PX
-from ..rendering import FrameTruth
+from ..rendering import FrameTruth, Renderer
 from ..vehicle import MIN_CRUISE_SPEED_M_S, CarParams
 from .metrics import EPSILON_PX
 from .runner import WITH_LIS, WITHOUT_LIS, run_scenario
@@ -102,6 +105,7 @@ def _evaluate_parser(sub: Any) -> None:
     ev.add_argument("--xml", type=Path, help="lanes per frame, thesis listing 4.1 (one track)")
     ev.add_argument("--jsonl", type=Path, help="every frame of every run as JSON Lines")
     ev.add_argument("--video", type=Path, help="MP4 with ROIs and lanes drawn (one track)")
+    add_camera_option(ev)
     add_force_option(ev)
     add_json_option(ev)
     ev.set_defaults(func=cmd_evaluate, parser=ev)
@@ -142,17 +146,19 @@ def _check(args: argparse.Namespace) -> None:
             if getattr(args, opt) is not None:
                 raise CliError(f"--{opt} writes one track's run; give a single seed "
                                f"(--seeds {args.seeds.start}:{args.seeds.start + 1})")
-    check_outputs({k: getattr(args, k) for k in _SUFFIXES}, _SUFFIXES, args.force)
+    check_outputs({k: getattr(args, k) for k in _SUFFIXES}, _SUFFIXES, args.force,
+                  inputs={"camera": camera_input(args.camera)})
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from ..outputs import Outputs
 
     _check(args)
-    configs = _configs(args)
+    camera = check_camera_geometry(args.camera)
+    configs = {k: c.on_camera(camera) for k, c in _configs(args).items()}
     kind = ScenarioKind(args.scenario)
     progress = sys.stderr.isatty() or not args.json
-    out: dict[str, Any] = {"scenario": kind.value, "preset": args.preset,
+    out: dict[str, Any] = {"scenario": kind.value, "preset": args.preset, "camera": args.camera,
                            "epsilon_px": args.epsilon_px, "speed_m_s": args.speed,
                            "stride": args.stride, "runs": list(configs)}
     with Outputs() as outs:
@@ -194,7 +200,7 @@ def _evaluate_seeds(args: argparse.Namespace, configs: Mapping[str, DetectorConf
         bar = stack.enter_context(tqdm(total=len(args.seeds), desc="tracks", unit="track",
                                        disable=not progress))
         results = iter_seeds(args.seeds, configs, workers=workers, epsilon_px=args.epsilon_px,
-                             speed_m_s=args.speed, stride=args.stride,
+                             camera=args.camera, speed_m_s=args.speed, stride=args.stride,
                              max_frames=args.max_frames)
 
         def keep(runs: Mapping[str, Any]) -> None:
@@ -257,11 +263,13 @@ def _evaluate_one(args: argparse.Namespace, configs: Mapping[str, DetectorConfig
         hook = None
         if args.video is not None:
             writer = stack.enter_context(VideoWriter(outs.path(args.video),
-                                                     FRAME_RATE_HZ / args.stride))
+                                                     load_camera(args.camera).frame_rate_hz
+                                                     / args.stride))
             hook = _video_hook(writer, _primary_label(configs))
         try:
             single = run_scenario(scenario, configs, epsilon_px=args.epsilon_px,
-                                  progress=progress, on_frame=hook)
+                                  progress=progress, on_frame=hook,
+                                  renderer=Renderer(load_camera(args.camera)))
         except ScenarioInterrupted as exc:
             end.interrupted = True
             if exc.results is None:
@@ -391,6 +399,7 @@ def _compare_parser(sub: Any) -> None:
     cp.add_argument("--out", type=Path,
                     help="write compare.jsonl, compare.json, compare.md and compare.png into "
                          "this folder")
+    add_camera_option(cp)
     add_force_option(cp)
     add_json_option(cp)
     cp.set_defaults(func=cmd_compare, parser=cp)
@@ -410,7 +419,9 @@ def cmd_compare(args: argparse.Namespace) -> int:
         args.parser.error("--max-frames cuts generated laps; --no-generated runs none")
     if args.out is not None:  # checked before minutes of work, not after
         check_outputs({"out": args.out}, {"out": DIRECTORY}, args.force,
-                      files_in={"out": COMPARE_FILES.values()})
+                      files_in={"out": COMPARE_FILES.values()},
+                      inputs={"camera": camera_input(args.camera)})
+    check_camera_geometry(args.camera)
     jobs = len(thesis) + len(seeds)
     workers = workers_arg_value(args.workers, jobs)
     progress = sys.stderr.isatty() or not args.json
@@ -422,7 +433,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
               if files is not None else None)
         bar = stack.enter_context(tqdm(total=jobs, desc="scenarios", unit="scenario",
                                        disable=not progress))
-        results = iter_compare(thesis, seeds, max_frames=args.max_frames, workers=workers)
+        results = iter_compare(thesis, seeds, max_frames=args.max_frames, workers=workers,
+                               camera=args.camera)
         job_names = itertools.chain(thesis, (f"seed {s}" for s in seeds))  # lazily
 
         def keep(job: tuple[str, Mapping[str, Any]]) -> None:

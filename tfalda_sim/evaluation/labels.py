@@ -10,10 +10,11 @@ Format (``format: tfalda-sim-labels/1``)::
                    "boundary": "left", "points": [[u, v, width_px], ...]}, ...]}
 
 ``kind``: ``right_line``, ``centre_line``, ``left_line``, ``start_line`` or ``stop_line``;
-``road``: ``ego`` (the road the car is on) or ``other`` (a neighbouring or branching
-road's); ``boundary`` (optional): ``left`` or ``right`` for the two markings that bound
-the ego lane in view (on a straight: the centre line and the right line). ``points`` run along the marking, each with the marking's width
-there [px]. As the thesis painted its reference images (section 4.1.7), a dashed line is
+``road``: ``ego`` (the road the car is on) or ``other`` (a neighbouring or
+branching road's); ``boundary`` (optional): ``left`` or ``right`` for the two
+markings that bound the ego lane in view (on a straight: the centre line and the
+right line). ``points`` run along the marking, each with the marking's width there
+[px]. As the thesis painted its reference images (section 4.1.7), a dashed line is
 labelled continuous.
 """
 

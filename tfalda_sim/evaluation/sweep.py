@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from ..camera import load_camera
 from ..parallel import resolve_workers, stream
 from ..perception import DetectorConfig, LisConfig
 from ..rendering import Renderer
@@ -43,29 +44,32 @@ def ablation_configs(base: DetectorConfig | None = None) -> dict[str, DetectorCo
     return out
 
 
-_RENDERER: Renderer | None = None
+_RENDERERS: dict[str, Renderer] = {}
 
 
 def _one_seed(seed: int, configs: Mapping[str, DetectorConfig], epsilon_px: float,
-              scenario_kwargs: Mapping[str, Any]) -> dict[str, RunResult]:
-    global _RENDERER
-    if _RENDERER is None:  # one per worker process: its pixel geometry is costly
-        _RENDERER = Renderer()
+              scenario_kwargs: Mapping[str, Any], camera: str = "thesis"
+              ) -> dict[str, RunResult]:
+    renderer = _RENDERERS.get(camera)
+    if renderer is None:  # one per camera and worker process: its pixel geometry is costly
+        renderer = _RENDERERS[camera] = Renderer(load_camera(camera))
+    configs = {k: c.on_camera(renderer.camera) for k, c in configs.items()}
     scenario = generated_scenario(seed, **scenario_kwargs)
-    return run_scenario(scenario, configs, renderer=_RENDERER, epsilon_px=epsilon_px)
+    return run_scenario(scenario, configs, renderer=renderer, epsilon_px=epsilon_px)
 
 
 def iter_seeds(seeds: Iterable[int], configs: Mapping[str, DetectorConfig], *,
-               workers: int = 1, epsilon_px: float = EPSILON_PX,
+               workers: int = 1, epsilon_px: float = EPSILON_PX, camera: str = "thesis",
                **scenario_kwargs: Any) -> Iterator[dict[str, RunResult]]:
     """Every configuration on each generated track of ``seeds`` (one lap, see
-    ``generated_scenario`` for ``scenario_kwargs``), streamed from ``workers`` processes
+    ``generated_scenario`` for ``scenario_kwargs``) seen by ``camera`` (a profile name or
+    file; the configurations' pixel layout derived for it), streamed from ``workers`` processes
     (``tfalda_sim.parallel.stream``: bounded memory for any range). Results come in seed
     order and do not depend on the number of workers."""
     if workers < 1:
         raise ValueError(f"workers must be ≥ 1, got {workers}")
     job = partial(_one_seed, configs=dict(configs), epsilon_px=epsilon_px,
-                  scenario_kwargs=scenario_kwargs)
+                  scenario_kwargs=scenario_kwargs, camera=camera)
     yield from stream(job, (int(s) for s in seeds), workers=workers)
 
 

@@ -322,6 +322,16 @@ class DetectorConfig:
         return cls(tfalda=base.tfalda, lis=lis, layout=layout)
 
 
+    def on_camera(self, camera: Camera | str) -> DetectorConfig:
+        """This configuration on ``camera``: unchanged on the thesis camera or when its
+        layout is not the thesis' literal one (already derived, or the user's own); else
+        its stages with the geometry derived for ``camera`` (``for_camera``)."""
+        cam = load_camera(camera)
+        if is_thesis_camera(cam) or self.layout.table_px != INITIAL_ROIS:
+            return self
+        return DetectorConfig.for_camera(cam, self)
+
+
 def geometry_of(camera: Camera) -> CameraGeometry:
     """``camera``'s derived layout (computed once per camera object and cached)."""
     cached = _GEOMETRY_CACHE.get(id(camera))

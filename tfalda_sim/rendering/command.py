@@ -12,6 +12,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from ..camera.command import add_camera_option, camera_input, resolve_camera_arg
 from ..cli_common import (
     CliError,
     add_force_option,
@@ -35,13 +36,15 @@ def register(sub: Any) -> None:
                           "middle of the right lane)")
     ren.add_argument("--heading", type=finite_float_arg, default=0.0,
                      help="heading relative to the road [rad], left > 0")
-    ren.add_argument("--out", type=Path, required=True, help="frame PNG (752×480 grayscale)")
+    ren.add_argument("--out", type=Path, required=True,
+                     help="frame PNG (grayscale, the camera's size: 752×480 for thesis)")
     ren.add_argument("--truth", type=Path, help="ground-truth PNG (labels in colour, ego lane "
                                                 "boundaries in green)")
     ren.add_argument("--effects", choices=("off", "default", "random"), default="default",
                      help="photometric effects (random: drawn with --seed)")
     ren.add_argument("--seed", type=seed_arg, default=0,
                      help="seed of the random effects, the scene layout and the sensor noise")
+    add_camera_option(ren)
     add_force_option(ren)
     add_json_option(ren)
     ren.set_defaults(func=cmd_render)
@@ -66,7 +69,8 @@ def cmd_render(args: argparse.Namespace) -> int:
 
     track_file = Path(args.track) if args.track.lower().endswith(".json") else None
     check_outputs({"out": args.out, "truth": args.truth}, {"out": ".png", "truth": ".png"},
-                  args.force, inputs={"track": track_file})
+                  args.force, inputs={"track": track_file, "camera": camera_input(args.camera)})
+    camera = resolve_camera_arg(args.camera)
     track = resolve_track_arg(args.track)
     if not track.closed and not 0.0 <= args.s <= track.length_m:
         raise CliError(f"--s {args.s} m is outside the open track [0, {track.length_m:.2f}] m")
@@ -75,7 +79,7 @@ def cmd_render(args: argparse.Namespace) -> int:
                "random": lambda: DomainRandomization().sample(rng)}[args.effects]()
     x, y, h = (float(v) for v in track.pose(args.s, args.lateral))
     pose = (x, y, h + args.heading)
-    renderer = Renderer()
+    renderer = Renderer(camera)
     try:
         scene = build_scene(track, effects, rng)
     except ValueError as exc:  # a legal but huge track: the marking map's pixel cap
@@ -86,7 +90,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     render_ms = 1000.0 * (time.perf_counter() - t0)
     summary: dict[str, Any] = {
         "track": track.name, "s_m": args.s, "lateral_m": args.lateral,
-        "heading_rad": args.heading, "pose": list(pose), "effects": asdict(effects),
+        "heading_rad": args.heading, "pose": list(pose), "camera": args.camera,
+        "image_size_px": [camera.width, camera.height], "effects": asdict(effects),
         "render_ms": render_ms, "out": str(args.out),
     }
     with Outputs() as outs:  # the frame and the truth picture, or neither

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from ..camera.command import add_camera_option, camera_input
 from ..cli_common import (
     CliError,
     add_force_option,
@@ -15,6 +16,7 @@ from ..cli_common import (
     check_outputs,
     positive_int_arg,
 )
+from ..perception.command import check_camera_geometry
 from ..video import VideoError
 from .loop import Detector, HoughPreset, replay
 
@@ -37,18 +39,22 @@ def register(sub: Any) -> None:
                        help="passes over the video (default 1)")
     times.add_argument("--forever", action="store_true", help="loop until Ctrl-C")
     rp.add_argument("--hough-preset", choices=[p.value for p in HoughPreset],
-                    help="hough: the seed's numbers or the simulator preset (default; the "
-                         "seed's 0.9 threshold finds no rendered marking)")
+                    help="hough: the seed's numbers, the simulator preset (default; the "
+                         "seed's 0.9 threshold finds no rendered marking) or real (a real "
+                         "camera's frames, binarised at 0.6)")
     rp.add_argument("--out", type=Path, help="annotated MP4 (segments or ROIs and lanes)")
     rp.add_argument("--stages", action="store_true",
                     help="hough: write the seed's 2×2 stage view to --out instead")
+    add_camera_option(rp)
     add_force_option(rp, "an existing --out")
     add_json_option(rp)
     rp.set_defaults(func=cmd_replay)
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    check_outputs({"out": args.out}, {"out": ".mp4"}, args.force, inputs={"video": args.video})
+    check_outputs({"out": args.out}, {"out": ".mp4"}, args.force,
+                  inputs={"video": args.video, "camera": camera_input(args.camera)})
+    camera = check_camera_geometry(args.camera)
     if args.hough_preset is not None and args.detector != Detector.HOUGH.value:
         raise CliError("--hough-preset sets the Hough baseline; it does nothing with "
                        f"--detector {args.detector}: drop it")
@@ -60,7 +66,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
         result = replay(args.video, Detector(args.detector),
                         loops=None if args.forever else (args.loops or 1), out=args.out,
                         hough=HoughPreset(args.hough_preset), stages=args.stages,
-                        progress=sys.stderr.isatty() or not args.json)
+                        progress=sys.stderr.isatty() or not args.json, camera=camera)
+        result["camera"] = args.camera
     except (FileNotFoundError, VideoError) as exc:
         raise CliError(str(exc)) from None
     except OSError as exc:

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
+from ..camera import Camera, load_camera
 from ..histogram import TimeHistogram
 from ..interrupts import INTERRUPTS, ignoring_stops, is_interrupt
 from ..perception import (
@@ -35,7 +36,8 @@ from ..perception import (
     HoughDetector,
     TfaldaDetector,
 )
-from ..perception.params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX
+from ..perception.hough import BINARISE_LEVEL, REAL_FRAME_BINARISE_LEVEL, SIMULATOR_BINARISE_LEVEL
+from ..perception.params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX, is_thesis_camera
 from ..rendering.overlay import draw_hough, draw_observation, stage_view
 from ..video import VideoReader, VideoWriter
 
@@ -51,14 +53,27 @@ class Detector(enum.Enum):
 
 
 class HoughPreset(enum.Enum):
-    """The Hough baseline's settings: the seed's numbers, or the simulator preset
-    (``HoughConfig.simulator``: our markings' grey level, our car's bonnet as the mask)."""
+    """The Hough baseline's settings: the seed's numbers, the simulator preset
+    (``HoughConfig.simulator``: our markings' grey level, our car's bonnet as the mask), or
+    a real camera's frames (``REAL_FRAME_BINARISE_LEVEL``). On a camera other than the
+    thesis', the crop and mask are derived for it (``HoughConfig.for_camera``) and only
+    the binarising level comes from the preset."""
 
     SEED = "seed"
     SIMULATOR = "simulator"
+    REAL = "real"
 
-    def config(self) -> HoughConfig:
-        return HoughConfig() if self is HoughPreset.SEED else HoughConfig.simulator()
+    def config(self, camera: Camera | None = None) -> HoughConfig:
+        level = {HoughPreset.SEED: BINARISE_LEVEL,
+                 HoughPreset.SIMULATOR: SIMULATOR_BINARISE_LEVEL,
+                 HoughPreset.REAL: REAL_FRAME_BINARISE_LEVEL}[self]
+        if camera is None or is_thesis_camera(camera):
+            if self is HoughPreset.SEED:
+                return HoughConfig()
+            if self is HoughPreset.SIMULATOR:
+                return HoughConfig.simulator()
+            camera = camera or load_camera("thesis")
+        return HoughConfig.for_camera(camera, level)
 
 
 def _frame_step(detector: Detector, hough: HoughDetector | None,
@@ -90,17 +105,23 @@ def _frame_step(detector: Detector, hough: HoughDetector | None,
 
 def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
            out: Path | None = None, hough: HoughPreset = HoughPreset.SIMULATOR,
-           stages: bool = False, progress: bool = False) -> dict[str, Any]:
+           stages: bool = False, progress: bool = False, camera: Camera | None = None
+           ) -> dict[str, Any]:
     """Replay ``path`` ``loops`` times (``None``: until Ctrl-C) through ``detector``;
     the summary: frames, loops, frames/s, detector ms/frame, detections, conversions, and
     how it stopped (``"loops"`` or ``"interrupted"``). ``out`` gets the annotated frames,
-    or with ``stages`` (Hough only) the seed's 2×2 stage view of each frame."""
+    or with ``stages`` (Hough only) the seed's 2×2 stage view of each frame. ``camera``
+    (default: the thesis'): frames are converted to its size and both detectors use the
+    geometry derived for it."""
     if stages and detector is not Detector.HOUGH:
         raise ValueError("stages is the Hough baseline's 2×2 view; use the hough detector")
-    reader = VideoReader(path, size=(IMAGE_WIDTH_PX, IMAGE_HEIGHT_PX))
-    hough_det = HoughDetector(hough.config()) if detector is Detector.HOUGH else None
-    tfalda_det = TfaldaDetector(DetectorConfig.thesis()) if detector is Detector.TFALDA \
-        else None
+    size = (camera.width, camera.height) if camera is not None else (IMAGE_WIDTH_PX,
+                                                                       IMAGE_HEIGHT_PX)
+    reader = VideoReader(path, size=size)
+    hough_det = HoughDetector(hough.config(camera)) if detector is Detector.HOUGH else None
+    tfalda_cfg = DetectorConfig.thesis() if camera is None else \
+        DetectorConfig.thesis().on_camera(camera)
+    tfalda_det = TfaldaDetector(tfalda_cfg) if detector is Detector.TFALDA else None
     fps = reader.info.fps if math.isfinite(reader.info.fps) and reader.info.fps > 0 else \
         DEFAULT_FPS
     per_loop = reader.info.frame_count or None
