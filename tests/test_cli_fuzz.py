@@ -426,6 +426,7 @@ VALID: dict[str, list[str]] = {
     "timesteps": ["1", "64", "1000000000000"], "n_envs": ["1", "2", "64"],
     "faults": ["none", "blackout", "none,blackout", "bogus"],
     "speeds": ["1.5", "1,2", "0.5,1.5,3"], "loops": ["1", "2", "3"],
+    "camera": ["thesis", "reference-car", "car.yaml", "bad.json", "sony", "road.png"],
     "policy": [str(REAL_POLICY), "policy.zip", "report/policy.zip", "missing.zip",
                "track.json"],
 }

@@ -230,6 +230,38 @@ def test_camera_list(tmp_path: Path) -> None:
         "cameras": ["thesis", "reference-car"]}
 
 
+def test_camera_option_of_the_commands(tmp_path: Path) -> None:
+    """``--camera`` through the console script: render, drive, evaluate, compare, replay
+    and stress on the reference car; a camera file is an input no output may replace."""
+    r = tfalda("render", "--track", "straight", "--s", "2", "--camera", "reference-car",
+               "--out", "f.png", "--json", cwd=tmp_path).json()
+    assert r["camera"] == "reference-car"
+    assert_png(tmp_path / "f.png", (480, 752))
+    d = tfalda("drive", "--track", "oval", "--laps", "1", "--camera", "reference-car",
+               "--camera-video", "cam.mp4", "--json", cwd=tmp_path).json()
+    assert d["laps_completed"] == 1 and d["camera"] == "reference-car"
+    e = tfalda("evaluate", "--scenario", "random", "--seeds", "3:4", "--max-frames", "20",
+               "--camera", "reference-car", "--json", cwd=tmp_path).json()
+    assert e["camera"] == "reference-car" and e["frames_done"] == 20
+    c = tfalda("compare", "--no-thesis", "--seeds", "3:4", "--max-frames", "10", "--workers",
+               "1", "--camera", "reference-car", "--json", cwd=tmp_path).json()
+    assert c["groups"]["generated"]
+    rp = tfalda("replay", "cam.mp4", "--detector", "tfalda", "--camera", "reference-car",
+                "--json", cwd=tmp_path).json()
+    assert rp["frames"] > 100 and rp["camera"] == "reference-car"
+    s = tfalda("stress", "--seeds", "10003:10004", "--faults", "blackout", "--workers", "1",
+               "--camera", "reference-car", "--out", "st", "--json", cwd=tmp_path).json()
+    assert s["runs"] == 2
+    shutil.copy(Path(__file__).parents[1] / "tfalda_sim" / "camera" / "profiles"
+                / "reference-car.yaml", tmp_path / "car.yaml")
+    clash = tfalda("render", "--track", "oval", "--s", "1", "--camera", "car.yaml", "--out",
+                   "car.yaml", "--force", cwd=tmp_path, code=2)
+    assert "must end in .png" in clash.err or "input" in clash.err
+    blind = tfalda("drive", "--track", "oval", "--camera", "missing.yaml", cwd=tmp_path,
+                   code=2)
+    assert "--camera" in blind.err and "no such file" in blind.err
+
+
 @covers("render")
 def test_render(tmp_path: Path) -> None:
     doc = tfalda("render", "--track", "oval", "--s", "1", "--out", "F.png", "--truth", "G.png",
