@@ -121,6 +121,10 @@ def _build_sandbox(root: Path) -> None:
         "bad.json": b"{not json",
         "file.json": b"{}\n",
         "pic.png": _png(),
+        "frames/straight-road.png": (Path(__file__).parent / "data" / "reference"
+                                     / "straight-road.png").read_bytes(),
+        "frames/straight-road.labels.json": (Path(__file__).parent / "data" / "reference"
+                                             / "straight-road.labels.json").read_bytes(),
         "road.png": (Path(__file__).parent / "data" / "reference" / "straight-road.png"
                      ).read_bytes(),
         "car.yaml": (Path(__file__).parents[1] / "tfalda_sim" / "camera" / "profiles"
@@ -542,7 +546,9 @@ STARTS: dict[tuple[str, ...], list[list[str]]] = {
     ("track", "validate"): [["track.json", "--json"], ["figure-eight"]],
     ("render",): [["--track", "oval", "--s", "1", "--out", "new.png", "--truth", "truth.png",
                    "--json"]],
-    ("evaluate",): [["--scenario", "random", "--seeds", "3:4", "--max-frames", "3", "--jsonl",
+    ("evaluate",): [["--frames", "frames", "--labels", "frames", "--camera", "reference-car",
+                     "--repeat", "2", "--json"],
+                    ["--scenario", "random", "--seeds", "3:4", "--max-frames", "3", "--jsonl",
                      "new.jsonl", "--plot", "new.png", "--json"],
                     ["--scenario", "straight", "--stride", "50", "--xml", "new.xml",
                      "--video", "new.mp4"],

@@ -262,6 +262,29 @@ def test_camera_option_of_the_commands(tmp_path: Path) -> None:
     assert "--camera" in blind.err and "no such file" in blind.err
 
 
+def test_evaluate_labelled_real_frames(tmp_path: Path) -> None:
+    """``evaluate --frames DIR --labels DIR --camera``: the black-box metric on the
+    hand-labelled reference frames (docs/cameras.md)."""
+    doc = tfalda("evaluate", "--frames", REFERENCE_FRAMES, "--labels", REFERENCE_FRAMES,
+                 "--camera", "reference-car", "--repeat", "20", "--stills", "--detector",
+                 "both", "--json", cwd=tmp_path).json()
+    lis = doc["detectors"]["with LIS"]
+    assert lis["frames"] == 2
+    assert all(r["lanes_on_markings"] >= 3 for r in lis["per_frame"])
+    assert doc["detectors"]["Hough (real frames)"]["ego_found_share"] == 1.0
+    both = tfalda("evaluate", "--frames", REFERENCE_FRAMES, "--labels", REFERENCE_FRAMES,
+                  "--scenario", "straight", cwd=tmp_path, code=2)
+    assert "give one" in both.err
+    nolabels = tfalda("evaluate", "--frames", REFERENCE_FRAMES, "--labels", tmp_path,
+                      cwd=tmp_path, code=2)
+    assert "has no labels" in nolabels.err
+    (tmp_path / "f").mkdir()
+    cv2.imwrite(str(tmp_path / "f" / "small.png"), np.zeros((100, 100), np.uint8))
+    (tmp_path / "f" / "small.labels.json").write_text("{}")
+    wrong = tfalda("evaluate", "--frames", "f", "--labels", "f", cwd=tmp_path, code=2)
+    assert "100×100 px, the camera's frames are 752×480" in wrong.err
+
+
 @covers("render")
 def test_render(tmp_path: Path) -> None:
     doc = tfalda("render", "--track", "oval", "--s", "1", "--out", "F.png", "--truth", "G.png",

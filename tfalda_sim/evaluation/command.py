@@ -75,8 +75,21 @@ def _evaluate_parser(sub: Any) -> None:
                     "and score the lanes against the exact ground truth (thesis ch. 4). "
                     "Generated tracks stream: --jsonl gets each track's frames as it "
                     "finishes, and Ctrl-C keeps the tracks finished so far.")
-    ev.add_argument("--scenario", required=True, choices=[k.value for k in ScenarioKind],
+    ev.add_argument("--scenario", choices=[k.value for k in ScenarioKind],
                     help="the thesis' straight/curve/track drive, or generated tracks")
+    ev.add_argument("--frames", type=Path,
+                    help="instead of a scenario: a folder of real frames (a sequence, in name "
+                         "order), scored against --labels; see docs/cameras.md")
+    ev.add_argument("--labels", type=Path,
+                    help="with --frames: the folder of their <frame>.labels.json files")
+    ev.add_argument("--detector", choices=["tfalda", "hough", "both"], default=None,
+                    help="with --frames: which detectors to score (default tfalda)")
+    ev.add_argument("--repeat", type=bounded_int_arg(1, 1000), default=None,
+                    help="with --frames: feed each frame N times before scoring it (the LIS "
+                         "settles on a still image; default 1)")
+    ev.add_argument("--stills", action="store_true",
+                    help="with --frames: the frames are unrelated stills, the detectors start "
+                         "afresh on each (default: a sequence)")
     ev.add_argument("--seeds", type=seed_range_arg,
                     help="generated tracks A:B (seeds A … B−1) for --scenario random")
     runs = ev.add_mutually_exclusive_group()
@@ -122,7 +135,35 @@ def _configs(args: argparse.Namespace) -> dict[str, DetectorConfig]:
     return {WITH_LIS: preset, WITHOUT_LIS: DetectorConfig.without_lis()}
 
 
+_SCENARIO_ONLY = ("seeds", "max_frames", "workers", "plot", "xml", "jsonl", "video")
+_FRAMES_ONLY = ("labels", "detector", "repeat", "stills")
+
+
+def _check_frames(args: argparse.Namespace) -> None:
+    """``--frames`` mode: contradictory options refused by name."""
+    if args.scenario is not None:
+        args.parser.error("--scenario renders a drive, --frames scores real frames: give one")
+    if args.labels is None:
+        args.parser.error("--frames needs --labels DIR (the frames' <name>.labels.json)")
+    for opt in (*_SCENARIO_ONLY, "ablation"):
+        if getattr(args, opt) not in (None, False):
+            args.parser.error(f"--{opt.replace('_', '-')} applies to a --scenario, not to "
+                              "--frames")
+    if args.speed != THESIS_SPEED_M_S or args.stride != 1:
+        args.parser.error("--speed and --stride apply to a --scenario, not to --frames")
+    if args.detector == "hough" and (args.preset is not None or args.no_lis):
+        args.parser.error("--preset and --no-lis configure TFALDA; --detector hough runs "
+                          "none")
+
+
 def _check(args: argparse.Namespace) -> None:
+    if args.frames is None:
+        if args.scenario is None:
+            args.parser.error("give --scenario (a rendered drive) or --frames DIR --labels "
+                              "DIR (real frames)")
+        for opt in _FRAMES_ONLY:
+            if getattr(args, opt) not in (None, False):
+                args.parser.error(f"--{opt} applies to --frames, not to a --scenario")
     if args.no_lis and args.preset is not None:
         args.parser.error("--preset configures the run with the LIS; --no-lis runs only the "
                           "one without it: drop one of them")
@@ -153,6 +194,8 @@ def _check(args: argparse.Namespace) -> None:
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from ..outputs import Outputs
 
+    if args.frames is not None:
+        return _evaluate_frames(args)
     _check(args)
     camera = check_camera_geometry(args.camera)
     configs = {k: c.on_camera(camera) for k, c in _configs(args).items()}
@@ -179,6 +222,53 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
             if "tracks_done" in out else f"kept the {out['frames_done']} frames evaluated so far")
     files = [out[k] for k in ("plot", "xml", "jsonl", "video") if k in out]
     return sweep_exit(end, what + (f" ({', '.join(files)})" if files else ""))
+
+
+def _evaluate_frames(args: argparse.Namespace) -> int:
+    """``evaluate --frames DIR --labels DIR``: the detectors on labelled real frames."""
+    from ..perception.hough import REAL_FRAME_BINARISE_LEVEL, HoughConfig
+    from .frames import FramesError, frame_files, score_frames
+
+    _check_frames(args)
+    camera = check_camera_geometry(args.camera)
+    try:
+        pairs = frame_files(args.frames, args.labels)
+    except FramesError as exc:
+        raise CliError(str(exc)) from None
+    which = args.detector or "tfalda"
+    tfalda: dict[str, DetectorConfig] = {}
+    if which in ("tfalda", "both"):
+        args.preset = args.preset or "thesis"
+        base = {WITHOUT_LIS: DetectorConfig.without_lis()} if args.no_lis else {
+            WITH_LIS: PRESETS[args.preset](), WITHOUT_LIS: DetectorConfig.without_lis()}
+        tfalda = {k: c.on_camera(camera) for k, c in base.items()}
+    hough = ({"Hough (real frames)": HoughConfig.for_camera(camera, REAL_FRAME_BINARISE_LEVEL)}
+             if which in ("hough", "both") else {})
+    try:
+        results = score_frames(pairs, camera, tfalda=tfalda, hough=hough,
+                               repeat=args.repeat or 1, stills=args.stills,
+                               epsilon_px=args.epsilon_px)
+    except FramesError as exc:
+        raise CliError(str(exc)) from None
+    out = {"frames": str(args.frames), "labels": str(args.labels), "camera": args.camera,
+           "repeat": args.repeat or 1, "stills": args.stills, "epsilon_px": args.epsilon_px,
+           "detectors": {r.label: r.summary() | {"per_frame": r.per_frame} for r in results}}
+    if args.json:
+        print(json.dumps(out))
+        return 0
+    print(f"{len(pairs)} labelled {'stills' if args.stills else 'frames'} in {args.frames}, "
+          f"camera {args.camera}, each frame {args.repeat or 1}× (on a marking: ≥ 80 % of a "
+          f"line's pixels within {args.epsilon_px:g} px of one)")
+    for r in results:
+        s = r.summary()
+        extra = (f", lanes on markings {s['mean_lanes_on_markings']:.2f}/4"
+                 if "mean_lanes_on_markings" in s else "")
+        print(f"  {r.label:22} mean hit rate {s['mean_hit_rate']:.3f}{extra}, both ego "
+              f"boundaries found on {s['ego_found_share'] * 100:.0f} % of frames")
+        for rec in r.per_frame:
+            rates = " ".join(f"{v:.2f}" for v in rec["hit_rates"])
+            print(f"    {rec['frame']:28} {rates}")
+    return 0
 
 
 def _evaluate_seeds(args: argparse.Namespace, configs: Mapping[str, DetectorConfig],
