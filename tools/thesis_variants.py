@@ -63,7 +63,7 @@ def run(kind: ScenarioKind, camera: FisheyeCamera, current: bool) -> dict[str, d
     outer: dict[str, list[int]] = {k: [] for k in configs}
     seen: dict[str, int] = {k: 0 for k in configs}
 
-    def on_frame(seq, frame, truth, observations) -> None:  # noqa: ANN001
+    def on_frame(seq, frame, truth, observations) -> None:
         dist = truth_distance(truth.labels, (Marking.LEFT_LINE,))
         for label, obs in observations.items():
             if lane_hit_rates(obs.lanes[:1], dist)[0] >= ON_OUTER:

@@ -78,6 +78,8 @@ class LaneInferenceSystem:
     def __init__(self, config: LisConfig, rows: int) -> None:
         self.config = config
         self.widths = np.zeros((rows, 2))  # y_{n−1}: last filtered widths [px]
+        # the thesis camera's tolerances are the thesis' pixels: no per-frame interpolation
+        self._unit_scale = all(s == 1.0 for s in config.tolerance_scale)
         self.fault_count = 0
 
     def start(self, rows: Rows) -> None:
@@ -109,8 +111,9 @@ class LaneInferenceSystem:
                     ok = ok and lo <= measured[k] <= hi
             if ok and cfg.width_change:
                 seen = filtered if cfg.width_check is WidthCheck.FILTERED else measured
-                tol = cfg.width_tolerance_px * np.array(
-                    [tolerance_scale(cfg, left.y_top), tolerance_scale(cfg, left.y_bottom)])
+                tol = cfg.width_tolerance_px if self._unit_scale else cfg.width_tolerance_px * (
+                    np.array([tolerance_scale(cfg, left.y_top),
+                              tolerance_scale(cfg, left.y_bottom)]))
                 ok = bool(np.all(np.abs(seen - self.widths[r]) <= tol))
             if not ok:
                 out[r] = previous[r]
@@ -133,7 +136,8 @@ class LaneInferenceSystem:
         new, moved = [], []
         for up, low in zip(upper, lower, strict=True):
             x3 = vertical_target(up, low)
-            if abs(x3 - low.x_top) > cfg.vertical_tolerance_px * tolerance_scale(cfg, low.y_top):
+            scale = 1.0 if self._unit_scale else tolerance_scale(cfg, low.y_top)
+            if abs(x3 - low.x_top) > cfg.vertical_tolerance_px * scale:
                 new.append(low.with_top(low.x_top + cfg.vertical_weight * (x3 - low.x_top)))
                 moved.append(True)
             else:
