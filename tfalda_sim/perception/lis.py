@@ -30,7 +30,7 @@ Rows = list[tuple[LaneSegment, LaneSegment]]
 def width_limits(config: LisConfig, y_px: float) -> tuple[float, float]:
     """(min, max) lane width [px] at image row ``y_px``: table 2.3's values at its four
     rows, linear in between (for layouts with more than two rows) and held beyond."""
-    rows = np.asarray(config.width_limit_rows_px)
+    rows = config.width_limit_rows_px
     lo = np.array([a for a, _ in config.width_limits_px])
     hi = np.array([b for _, b in config.width_limits_px])
     return float(np.interp(y_px, rows, lo)), float(np.interp(y_px, rows, hi))
