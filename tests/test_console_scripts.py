@@ -407,6 +407,12 @@ def test_train_json(tmp_path: Path) -> None:
     assert _assert_trained(tmp_path / "out" / "tr")["timesteps_done"] == doc["timesteps_done"]
 
 
+def test_train_with_a_camera(tmp_path: Path) -> None:
+    doc = _train(tmp_path, "--camera", "reference-car", "--json").json()
+    assert doc["camera"] == "reference-car" and "--camera reference-car" in doc["command"]
+    _assert_trained(tmp_path / "out" / "tr")
+
+
 def test_train_with_progress_bar(tmp_path: Path) -> None:
     """Without --json the progress bar runs: the path that needed SB3's tqdm+rich extra."""
     run = _train(tmp_path)
