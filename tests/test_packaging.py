@@ -127,7 +127,7 @@ def _lint_with(tmp_path: Path, module: str, line: str) -> subprocess.CompletedPr
 @pytest.mark.parametrize("module, line, broken", [
     ("", "", None),
     # an upward import: the camera (a low layer) reaching for the env
-    ("camera.py", "from tfalda_sim.envs import TfaldaTrackEnv", "Layers"),
+    ("camera/models.py", "from tfalda_sim.envs import TfaldaTrackEnv", "Layers"),
     # a cycle inside a package: the spatial index importing the track model back
     ("tracks/index.py", "from .model import Track", "No import cycles"),
     # the old top-level name of a moved package

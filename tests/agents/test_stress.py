@@ -50,6 +50,6 @@ def test_battery_jobs_are_lazy_and_seed_by_seed() -> None:
     from tfalda_sim.agents.stress import battery_jobs
 
     jobs = battery_jobs(range(10**8), ["none", "blackout"])
-    assert list(islice(jobs, 5)) == [(0, "none", True), (0, "none", False),
-                                     (0, "blackout", True), (0, "blackout", False),
-                                     (1, "none", True)]
+    assert list(islice(jobs, 5)) == [(0, "none", True, "thesis"), (0, "none", False, "thesis"),
+                                     (0, "blackout", True, "thesis"),
+                                     (0, "blackout", False, "thesis"), (1, "none", True, "thesis")]

@@ -112,7 +112,8 @@ def test_stress_says_when_it_caps_the_workers(monkeypatch: pytest.MonkeyPatch, t
 
     seen = {}
 
-    def fake_battery(seeds: range, faults: list[str], *, workers: int) -> Iterator[object]:
+    def fake_battery(seeds: range, faults: list[str], *, workers: int,
+                     camera: str = "thesis") -> Iterator[object]:
         seen["workers"] = workers
         return iter(())
 
