@@ -210,3 +210,25 @@ def _is_grey(frame: np.ndarray) -> bool:
     """The frame's channels are equal within ``GREY_TOLERANCE_DN``."""
     c = frame[..., :3].astype(np.int16)
     return bool(np.abs(c - c[..., :1]).max() <= GREY_TOLERANCE_DN)
+
+
+class ImageError(ValueError):
+    """An image file that cannot be read as a grey frame; the message names the file."""
+
+
+def read_grey_image(path: Path) -> np.ndarray:
+    """``path`` (PNG, JPEG, …; 8 or 16 bit, grey or colour) as an 8-bit grey image."""
+    if not path.exists():
+        raise ImageError(f"{path}: no such file")
+    if path.is_dir():
+        raise ImageError(f"{path}: is a folder, not an image")
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise ImageError(f"{path}: not an image OpenCV can read (PNG, JPEG, …)")
+    if img.ndim == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2GRAY if img.shape[2] == 4 else cv2.COLOR_BGR2GRAY)
+    if img.dtype == np.uint16:
+        img = (img >> 8).astype(np.uint8)
+    if img.dtype != np.uint8:
+        raise ImageError(f"{path}: {img.dtype} images are not supported; give 8 or 16 bit")
+    return img

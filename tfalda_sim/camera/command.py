@@ -15,6 +15,7 @@ import numpy as np
 
 from ..cli_common import CliError, add_force_option, add_json_option, check_outputs
 from ..outputs import Outputs
+from ..video import ImageError, read_grey_image
 from .bonnet import Bonnet
 from .drawing import fit_overlay
 from .fit import MountFit, MountFitError, detect_bonnet, fit_focal, fit_mount
@@ -105,20 +106,10 @@ def resolve_camera_arg(text: str) -> Camera:
 
 # --------------------------------------------------------------------------- fit
 def _read_frame(path: Path) -> np.ndarray:
-    if not path.exists():
-        raise CliError(f"{path}: no such file")
-    if path.is_dir():
-        raise CliError(f"{path}: is a folder, not an image")
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise CliError(f"{path}: not an image OpenCV can read (PNG, JPEG, …)")
-    if img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_BGRA2GRAY if img.shape[2] == 4 else cv2.COLOR_BGR2GRAY)
-    if img.dtype == np.uint16:
-        img = (img >> 8).astype(np.uint8)
-    if img.dtype != np.uint8:
-        raise CliError(f"{path}: {img.dtype} images are not supported; give 8 or 16 bit")
-    return img
+    try:
+        return read_grey_image(path)
+    except ImageError as exc:
+        raise CliError(str(exc)) from None
 
 
 def _read_json(path: Path, option: str) -> Any:

@@ -8,11 +8,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
 
 from ..camera import Camera
 from ..perception import DetectorConfig, HoughConfig, HoughDetector, TfaldaDetector
+from ..video import ImageError, read_grey_image
 from .baseline import band_rows, score_lines
 from .labels import LabelsError, labels_path_for, load_labels
 from .metrics import EPSILON_PX, lane_hit_rates, truth_distance
@@ -55,15 +55,10 @@ def frame_files(folder: Path, labels: Path) -> list[tuple[Path, Path]]:
 
 def read_frame(path: Path, camera: Camera) -> np.ndarray:
     """``path`` as the camera's 8-bit grey frame (colour converted; another size refused)."""
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise FramesError(f"{path}: not an image OpenCV can read")
-    if img.ndim == 3:
-        img = cv2.cvtColor(img, cv2.COLOR_BGRA2GRAY if img.shape[2] == 4 else cv2.COLOR_BGR2GRAY)
-    if img.dtype == np.uint16:
-        img = (img >> 8).astype(np.uint8)
-    if img.dtype != np.uint8:
-        raise FramesError(f"{path}: {img.dtype} images are not supported")
+    try:
+        img = read_grey_image(path)
+    except ImageError as exc:
+        raise FramesError(str(exc)) from None
     if img.shape != (camera.height, camera.width):
         raise FramesError(f"{path}: {img.shape[1]}×{img.shape[0]} px, the camera's frames are "
                           f"{camera.width}×{camera.height}: give the camera it was taken with")
