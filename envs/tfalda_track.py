@@ -194,7 +194,8 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
       normalised; every index is documented in ``tfalda_sim.envs.observation`` (lane ends of the
       four ROIs, ROI positions, LIS flags, lane widths, fault counter, reset, driving
       state, speed and steering feedback).
-    - ``"image"``: ``Box(0, 255, (480, 752, 1), uint8)``, the grayscale camera frame.
+    - ``"image"``: ``Box(0, 255, (height, width, 1), uint8)``, the grayscale camera frame
+      (480×752 on the thesis camera; the ``camera``'s size otherwise).
     - ``"dict"``: ``Dict(lanes=…, image=…)``.
 
     ## Rewards
@@ -220,8 +221,8 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
     ## Episode End
     Terminated when the centre of the car leaves the road (beyond a side line's outer
     edge) or the car touches a carton. Truncated after ``max_laps`` laps (if set) or at
-    the end of an open track; ``gymnasium.make`` adds the step limit (3000 steps = 60 s
-    by default, ``max_episode_steps=…``).
+    the end of an open track; ``gymnasium.make`` adds the step limit (3000 steps by
+    default, 60 s at the thesis camera's 50 frames/s; ``max_episode_steps=…``).
 
     ## Info
     ``cross_track_m``, ``heading_error_rad``, ``s_m``, ``lap`` (completed laps),
@@ -246,7 +247,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
     TFALDA + LIS configuration, a ``DetectorConfig`` or a preset name: ``"thesis"`` (the
     default), ``"improved"`` or ``"without_lis"`` (``DetectorConfig``'s classmethods).
     ``camera``: the car's camera — a profile name (``"thesis"``, the default, or
-    ``"reference-car"``), a profile or calibration-plus-mount file, or a
+    ``"reference-car"``), a profile file, or a
     ``tfalda_sim.camera.Camera`` (any lens model and image size; the observation's image
     and the step rate follow it). On a camera other than the thesis', a preset or a
     ``DetectorConfig`` with the thesis' pixel layout gets its geometry derived for the

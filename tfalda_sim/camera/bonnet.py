@@ -60,6 +60,12 @@ class Bonnet:
             poly.setflags(write=False)
             object.__setattr__(self, "polygon_px", poly)
 
+    def __setstate__(self, state: dict) -> None:
+        # A pickled or copied bonnet keeps its polygon read-only.
+        self.__dict__.update(state)
+        if self.polygon_px is not None:
+            self.polygon_px.setflags(write=False)
+
     @classmethod
     def none(cls) -> Bonnet:
         """No car body in view."""
@@ -72,8 +78,13 @@ class Bonnet:
 
     def check_inside(self, width: int, height: int) -> None:
         """Refuse a polygon with a vertex outside a ``width``×``height`` image (a polygon
-        drawn for another image size)."""
+        drawn for another image size), or a parabola whose edge is not in the image."""
         if self.polygon_px is None:
+            if self.enabled and not (0.0 <= self.top_row < height
+                                     and -height <= self.edge_drop_px <= height):
+                raise ValueError(f"bonnet parabola top_row {self.top_row:g} px must lie in the "
+                                 f"{height}-row image and edge_drop_px "
+                                 f"{self.edge_drop_px:g} within ±{height} px")
             return
         u, v = self.polygon_px[:, 0], self.polygon_px[:, 1]
         bad = (u < -0.5) | (u > width - 0.5) | (v < -0.5) | (v > height - 0.5)

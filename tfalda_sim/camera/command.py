@@ -63,7 +63,7 @@ def register(sub: Any) -> None:
                           "a JSON file of the polygon [[u, v], ...] [px] (default: auto)")
     fit.add_argument("--forward-m", type=float, default=None,
                      help="camera ahead of the rear axle [m] (one frame cannot tell; "
-                          "default: the intrinsics file's, else 0.20)")
+                          "default: an --intrinsics profile's, else 0.20)")
     fit.add_argument("--out", type=Path, required=True, help="the profile to write (.yaml)")
     fit.add_argument("--overlay", type=Path,
                      help="the overlay PNG (default: the profile's name with -fit.png)")
@@ -127,7 +127,7 @@ def _pixel_list(value: Any, what: str) -> np.ndarray:
     if not isinstance(value, list) or not all(
             isinstance(p, list) and len(p) == 2
             and all(isinstance(c, (int, float)) and not isinstance(c, bool)
-                    and math.isfinite(c) for c in p) for p in value):
+                    and abs(c) < 1e9 and math.isfinite(c) for c in p) for p in value):
         raise CliError(f"{what} must be a list of [u, v] pixel pairs")
     return np.array(value, dtype=np.float64)
 
@@ -148,7 +148,12 @@ def _bonnet(spec: str, frame: np.ndarray) -> Bonnet:
     if spec == "none":
         return Bonnet.none()
     if spec == "auto":
-        return Bonnet.polygon(detect_bonnet(frame))
+        try:
+            return Bonnet.polygon(detect_bonnet(frame))
+        except ValueError as exc:
+            if isinstance(exc, MountFitError):
+                raise
+            raise CliError(f"--bonnet auto: {exc}") from None
     poly = _pixel_list(_read_json(Path(spec), "--bonnet"), "--bonnet")
     try:
         bonnet = Bonnet.polygon(poly)
@@ -194,6 +199,13 @@ def cmd_camera_fit(args: argparse.Namespace) -> int:
         else:
             intr = load_intrinsics(args.intrinsics, LensModel(args.lens) if args.lens else None)
             base = intr.camera(CameraMount())
+            if args.lens is None:
+                try:  # a profile as --intrinsics: keep its forward offset and frame rate
+                    own = load_camera(args.intrinsics)
+                    base = base.replace(mount=CameraMount(forward_m=own.mount.forward_m),
+                                        frame_rate_hz=own.frame_rate_hz)
+                except CameraFileError:
+                    pass  # a calibration file: no mount, the defaults
             fit = fit_mount(frame, base, points=points, forward_m=args.forward_m)
         bonnet = _bonnet(args.bonnet, frame)
     except CameraFileError as exc:

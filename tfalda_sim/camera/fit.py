@@ -233,6 +233,9 @@ def fit_mount(frame: np.ndarray, camera: Camera, *, points: list[np.ndarray] | N
             p = np.asarray(pts, dtype=np.float64)
             if len(p) < 2:
                 raise MountFitError(f"the {role} line needs at least 2 marked pixels")
+            if ((p < -0.5) | (p > [camera.width - 0.5, camera.height - 0.5])).any():
+                raise MountFitError(f"a marked pixel of the {role} line lies outside the "
+                                    f"{camera.width}×{camera.height} frame")
             r = camera.unproject(p)
             _, _, vt = np.linalg.svd(r, full_matrices=False)
             lines.append((vt[-1], p, role))
@@ -366,9 +369,13 @@ def _finish(camera: Camera, fits: list[LineFit], direction: np.ndarray,
     R = np.column_stack([direction, e_lat, g])
     pitch, roll, yaw = _rot_to_angles(R @ _BASE.T)
     lateral = -(y0 - LANE_WIDTH_M / 2)  # camera left of the lane centre
-    mount = CameraMount(height_m=h, forward_m=camera.mount.forward_m if forward_m is None
-                        else forward_m, lateral_m=lateral, pitch_rad=pitch, roll_rad=roll,
-                        yaw_rad=yaw)
+    try:
+        mount = CameraMount(height_m=h, forward_m=camera.mount.forward_m if forward_m is None
+                            else forward_m, lateral_m=lateral, pitch_rad=pitch,
+                            roll_rad=roll, yaw_rad=yaw)
+    except ValueError as exc:  # lines that fit no camera on a car
+        raise MountFitError(f"the lines fit no camera on a 1:10 car ({exc}): are these the "
+                            "lane's markings, 0.4 m apart?") from None
     fitted = camera.replace(mount=mount)
     residual = _residual(fitted, used, y0 + lateral)  # the centre line in the car frame
     return MountFit(fitted, tuple(fits), residual, roll_fitted, f_px)

@@ -45,6 +45,9 @@ MAX_IMAGE_SIDE_PX: int = 8192
 MAX_FRAME_RATE_HZ: float = 1000.0
 """Highest frame rate accepted [1/s]."""
 
+UNPROJECT_TOLERANCE_PX: float = 1e-3
+"""A pinhole pixel whose ray projects back further off than this [px] has no ray."""
+
 PINHOLE_MIN_Z_M: float = 1e-6
 """A pinhole camera sees points at least this far in front of its centre [m]; nearer or
 behind project to NaN."""
@@ -81,7 +84,9 @@ class Camera:
     width: int = SENSOR_WIDTH_PX
     height: int = SENSOR_HEIGHT_PX
     mount: CameraMount = field(default_factory=CameraMount)
-    bonnet: Bonnet = field(default_factory=Bonnet)
+    bonnet: Bonnet | None = None
+    """The car's body in the image; ``None``: the thesis camera's parabola on a 752×480
+    image (it is in pixels of that size), no body on any other."""
     frame_rate_hz: float = FRAME_RATE_HZ
 
     lens: LensModel = field(init=False, repr=False, default=LensModel.FISHEYE)
@@ -111,12 +116,21 @@ class Camera:
                              f"outside the {self.width}×{self.height} image: K for another size?")
         if not isinstance(self.mount, CameraMount):
             raise TypeError(f"mount must be a CameraMount, got {type(self.mount).__name__}")
+        if self.bonnet is None:
+            thesis_size = (self.width, self.height) == (SENSOR_WIDTH_PX, SENSOR_HEIGHT_PX)
+            object.__setattr__(self, "bonnet", Bonnet() if thesis_size else Bonnet.none())
         if not isinstance(self.bonnet, Bonnet):
             raise TypeError(f"bonnet must be a Bonnet, got {type(self.bonnet).__name__}")
         self.bonnet.check_inside(self.width, self.height)
         if not 0.0 < self.frame_rate_hz <= MAX_FRAME_RATE_HZ:
             raise ValueError(f"frame_rate_hz must be in (0, {MAX_FRAME_RATE_HZ:g}], got "
                              f"{self.frame_rate_hz}")
+
+    def __setstate__(self, state: dict) -> None:
+        # A pickled or copied camera keeps its arrays read-only (caches key on identity).
+        self.__dict__.update(state)
+        self.K.setflags(write=False)
+        self.D.setflags(write=False)
 
     def with_mount(self, **changes: float) -> Camera:
         """The same lens on a changed mount, e.g. ``cam.with_mount(height_m=0.15)``."""
@@ -270,7 +284,8 @@ class PinholeCamera(Camera):
     def unproject(self, pixels: np.ndarray) -> np.ndarray:
         """``(N, 2)`` pixels → ``(N, 3)`` unit rays in the camera frame (z > 0); the
         distortion is inverted by Newton's method from ``cv2.undistortPoints``' estimate
-        (its fixed-point iteration stops at a few 1e-4 px for strong distortion)."""
+        (its fixed-point iteration stops at a few 1e-4 px for strong distortion). NaN for
+        a pixel no ray reaches (past the distortion polynomial's turning point)."""
         uv = np.asarray(pixels, dtype=np.float64)
         if uv.ndim != 2 or uv.shape[1] != 2:
             raise ValueError(f"unproject expects an (N, 2) array of pixels, got {uv.shape}")
@@ -296,4 +311,11 @@ class PinholeCamera(Camera):
                 x = x - (j22 * fx - j12 * fy) / det
                 y = y - (j11 * fy - j21 * fx) / det
         rays = np.column_stack([x, y, np.ones(len(x))])
-        return rays / np.linalg.norm(rays, axis=1, keepdims=True)
+        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+        # Beyond the distortion polynomial's turning point no ray maps to the pixel:
+        # NaN there, not a wrong ray.
+        with np.errstate(invalid="ignore"):
+            back = self.project(rays)
+            bad = ~(np.hypot(*(back - uv).T) <= UNPROJECT_TOLERANCE_PX)
+        rays[bad] = np.nan
+        return rays

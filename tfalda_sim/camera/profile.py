@@ -124,12 +124,15 @@ def _read_text(path: Path) -> str:
                               f"{', '.join(NAMED_CAMERAS)} — or a camera file)")
     if path.is_dir():
         raise CameraFileError(f"{path}: is a folder, not a camera file")
+    if not path.is_file():
+        raise CameraFileError(f"{path}: not a regular file (a device or a pipe?)")
     try:
-        size = path.stat().st_size
-        if size > MAX_PROFILE_BYTES:
-            raise CameraFileError(f"{path}: {size} bytes is not a camera file (at most "
-                                  f"{MAX_PROFILE_BYTES} bytes)")
-        return path.read_bytes().decode("utf-8")
+        with open(path, "rb") as fh:  # bounded whatever the size claims
+            data = fh.read(MAX_PROFILE_BYTES + 1)
+        if len(data) > MAX_PROFILE_BYTES:
+            raise CameraFileError(f"{path}: larger than {MAX_PROFILE_BYTES} bytes: not a "
+                                  "camera file")
+        return data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise CameraFileError(f"{path}: not a text file (byte {exc.start} is not UTF-8): "
                               "is it a camera file?") from None
@@ -140,6 +143,9 @@ def _read_text(path: Path) -> str:
 def _parse_yaml(path: Path, text: str) -> Any:
     try:
         return yaml.load(text, Loader=_StrictLoader)
+    except TypeError:  # a complex (list or mapping) key
+        raise CameraFileError(f"{path}: a key that is a list or a mapping: keys are names")\
+            from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
         where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark else ""
@@ -150,9 +156,13 @@ def _parse_yaml(path: Path, text: str) -> Any:
 def _number(path: Path, field: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise CameraFileError(f"{path}: {field} must be a number, got {value!r}")
-    if not math.isfinite(value):
+    try:
+        number = float(value)
+    except OverflowError:
+        raise CameraFileError(f"{path}: {field} is too large to be a number") from None
+    if not math.isfinite(number):
         raise CameraFileError(f"{path}: {field} must be finite, got {value}")
-    return float(value)
+    return number
 
 
 def _integer(path: Path, field: str, value: Any) -> int:
@@ -192,7 +202,7 @@ def _checked_camera(path: Path, build: Any) -> Camera:
 def _lens(path: Path, value: Any, field: str = "lens") -> LensModel:
     try:
         return LensModel(value)
-    except ValueError:
+    except (ValueError, TypeError):
         raise CameraFileError(f"{path}: {field} must be one of "
                               f"{', '.join(m.value for m in LensModel)}, got {value!r}") from None
 
@@ -358,13 +368,18 @@ def _opencv_intrinsics(path: Path, lens: LensModel | None) -> Intrinsics:
                 raise CameraFileError(f"{path}: no {name}: the image size is needed (add "
                                       f"'{name}: N' — OpenCV's calibration sample writes it)")
             value = node.real()
-            if value != int(value) or value <= 0:
+            if not math.isfinite(value) or value != int(value) or value <= 0:
                 raise CameraFileError(f"{path}: {name} must be a positive integer, got {value}")
             return int(value)
 
-        K = mat("camera_matrix")
-        D = mat("distortion_coefficients").ravel()
-        width, height = size("image_width"), size("image_height")
+        try:
+            K = mat("camera_matrix")
+            D = mat("distortion_coefficients").ravel()
+            width, height = size("image_width"), size("image_height")
+        except (cv2.error, SystemError) as exc:
+            msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else "unreadable"
+            raise CameraFileError(f"{path}: a malformed OpenCV matrix or size: {msg}") \
+                from None
     finally:
         fs.release()
     if K.shape != (3, 3):
@@ -401,7 +416,7 @@ def _ros_intrinsics(path: Path, data: dict, lens: LensModel | None) -> Intrinsic
     _unknown(path, "the camera_info file", data, known)
     model = data["distortion_model"]
     ros = {"equidistant": LensModel.FISHEYE, "plumb_bob": LensModel.PINHOLE}
-    if model not in ros:
+    if not isinstance(model, str) or model not in ros:
         raise CameraFileError(f"{path}: distortion_model {model!r} is not supported (known: "
                               "equidistant, plumb_bob)")
     found = ros[model]
@@ -431,7 +446,11 @@ def _read(path: Path, lens: LensModel | None) -> tuple[str, Any]:
     """('profile', Camera) or ('intrinsics', Intrinsics)."""
     text = _read_text(path)
     head = text.lstrip()[:200]
-    if head.startswith("%YAML") or head.startswith("<?xml") or "<opencv_storage>" in head:
+    # OpenCV's YAML: "%YAML:1.0" (older OpenCV) or "%YAML 1.0" with !!opencv-matrix tags;
+    # any other "%YAML" file is plain YAML
+    opencv_yaml = head.startswith("%YAML:") or (head.startswith("%YAML") and (
+        "!!opencv-" in text or head.startswith("%YAML 1.0") or head.startswith("%YAML:1.0")))
+    if opencv_yaml or head.startswith("<?xml") or "<opencv_storage>" in head:
         return "intrinsics", _opencv_intrinsics(path, lens)
     data = _parse_yaml(path, text)
     if not isinstance(data, dict):

@@ -353,8 +353,7 @@ def _evaluate_one(args: argparse.Namespace, configs: Mapping[str, DetectorConfig
         hook = None
         if args.video is not None:
             writer = stack.enter_context(VideoWriter(outs.path(args.video),
-                                                     load_camera(args.camera).frame_rate_hz
-                                                     / args.stride))
+                                                     FRAME_RATE_HZ / args.stride))
             hook = _video_hook(writer, _primary_label(configs))
         try:
             single = run_scenario(scenario, configs, epsilon_px=args.epsilon_px,

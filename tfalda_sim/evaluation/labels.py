@@ -107,10 +107,10 @@ def load_labels(path: str | Path, width: int | None = None, height: int | None =
         if extra:
             raise _fail(p, f"unknown key {extra[0]!r} in {where} (known: "
                            f"{', '.join(_MARKING_KEYS)})")
-        if m.get("kind") not in _KINDS:
+        if not isinstance(m.get("kind"), str) or m["kind"] not in _KINDS:
             raise _fail(p, f"{where}.kind must be one of {', '.join(_KINDS)}, got "
                            f"{m.get('kind')!r}")
-        if m.get("road") not in _ROADS:
+        if not isinstance(m.get("road"), str) or m["road"] not in _ROADS:
             raise _fail(p, f"{where}.road must be ego or other, got {m.get('road')!r}")
         pts = _points(p, where, m.get("points"), w, h)
         mark = _KINDS[m["kind"]]
@@ -120,7 +120,7 @@ def load_labels(path: str | Path, width: int | None = None, height: int | None =
                      int(mark), thick, lineType=cv2.LINE_8, shift=4)
         side = m.get("boundary")
         if side is not None:
-            if side not in ("left", "right"):
+            if not isinstance(side, str) or side not in ("left", "right"):
                 raise _fail(p, f"{where}.boundary must be left or right, got {side!r}")
             if side in boundaries:
                 raise _fail(p, f"{where}: a second {side} boundary of the ego lane")
@@ -132,7 +132,7 @@ def load_labels(path: str | Path, width: int | None = None, height: int | None =
 def _points(path: Path, where: str, value: Any, w: int, h: int) -> np.ndarray:
     ok = isinstance(value, list) and len(value) >= 2 and all(
         isinstance(q, list) and len(q) == 3 and all(
-            isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c)
+            isinstance(c, (int, float)) and not isinstance(c, bool) and _finite(c)
             for c in q) for q in value)
     if not ok:
         raise _fail(path, f"{where}.points must be ≥ 2 [u, v, width_px] triples of finite "
@@ -144,6 +144,13 @@ def _points(path: Path, where: str, value: Any, w: int, h: int) -> np.ndarray:
     if (pts[:, 2] <= 0).any() or (pts[:, 2] > MAX_MARKING_WIDTH_PX).any():
         raise _fail(path, f"{where}.points widths must be in (0, {MAX_MARKING_WIDTH_PX:g}] px")
     return pts
+
+
+def _finite(value: float) -> bool:
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # an int too large for a float
+        return False
 
 
 def _densify(poly: np.ndarray) -> np.ndarray:

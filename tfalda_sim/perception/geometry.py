@@ -7,7 +7,8 @@ weights. Here each is what it covers on the road — metres ahead of the camera 
 the car's centre line, for a car centred in the right lane of a straight (lines at
 ±``LANE_WIDTH_M``/2) — found by back-projecting the thesis' numbers through the thesis
 camera (``FisheyeCamera.default()``, ``docs/camera-calibration.md``) and rounded to
-millimetres; ``layout_for_camera`` projects them through another camera.
+millimetres; ``camera_geometry`` projects them through another camera
+(``DetectorConfig.for_camera``).
 ``for_camera(thesis camera)`` gives table 2.4 within ``THESIS_AGREEMENT_PX`` (tested).
 
 Distances are measured along the ground from the point below the camera; lateral
@@ -212,6 +213,9 @@ def _clear_of_bonnet(camera: Camera, top: int, height: int, near_m: float, far_m
     """The row's height and near distance with its bottom above the bonnet in
     ``columns`` (half-open) [px]; refused when the bonnet hides more than half its depth."""
     edge = camera.bonnet.edge(np.arange(columns[0], columns[1]), camera.width, camera.height)
+    edge = edge[np.isfinite(edge)]
+    if not len(edge):  # no body in these columns
+        return height, near_m
     clear = math.ceil(float(np.min(edge))) - 1  # last row above the body in these columns
     if top + height - 1 <= clear:
         return height, near_m

@@ -226,8 +226,9 @@ class HoughConfig:
         camera, profile name or file): the crop from ``CROP_FAR_M`` ahead down to the
         lowest row where road is seen, the mask over
         the camera's bonnet in ``MASK_BANDS`` column bands. ``binarise_level`` is a
-        property of the frames, not the camera: the seed's 0.9 for real frames,
-        ``SIMULATOR_BINARISE_LEVEL`` for the simulator's renders."""
+        property of the frames, not the camera: ``REAL_FRAME_BINARISE_LEVEL`` for the
+        reference car's real frames, ``SIMULATOR_BINARISE_LEVEL`` for the simulator's
+        renders (default: the seed's 0.9)."""
         from .geometry import CameraGeometryError, row_at
 
         cam = load_camera(camera)

@@ -222,7 +222,7 @@ class RoiLayout:
     """Where the ROIs go, in pixels of one camera: ``rows`` ≥ 2 rows of (left, right) ROIs
     over the band the two rows of ``table_px`` cover, and the pixel sizes of ROI
     placement. The defaults are the thesis' literal numbers (table 2.4, listings A.6 and
-    3.5); ``perception.geometry.layout_for_camera`` derives them for any camera from their
+    3.5); ``DetectorConfig.for_camera`` derives them for any camera from their
     ground-plane definitions. More rows approximate a curve with more segments (section
     5.1's second weakness); two rows reproduce ``table_px`` exactly."""
 

@@ -124,3 +124,18 @@ def test_fit_from_marked_points_agrees_with_the_automatic_fit() -> None:
     assert abs(m.height_m - r.height_m) < 0.005
     with pytest.raises(MountFitError, match="centre line and at least one neighbour"):
         fit_mount(np.zeros((480, 752), np.uint8), ref, points=[None, by_kind["left_line"]])
+
+
+def test_lines_that_fit_no_car_are_refused() -> None:
+    """Three marked lines a pixel apart would put the camera metres high: refused."""
+    ref = load_camera("reference-car")
+    labels = json.loads((REFERENCE / "straight-road.labels.json").read_text())
+    centre = np.array(next(m["points"] for m in labels["markings"]
+                           if m["kind"] == "centre_line"))[:, :2]
+    shift = np.array([1.5, 0.0])
+    with pytest.raises(MountFitError, match=r"fit no camera on a 1:10 car|negative"):
+        fit_mount(np.zeros((480, 752), np.uint8), ref,
+                  points=[centre, centre - shift, centre + shift])
+    with pytest.raises(MountFitError, match="outside the 752×480 frame"):
+        fit_mount(np.zeros((480, 752), np.uint8), ref,
+                  points=[centre, centre + np.array([800.0, 0.0])])

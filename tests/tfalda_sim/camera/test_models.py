@@ -209,3 +209,10 @@ def test_camera_refuses_impossible_intrinsics() -> None:
         FisheyeCamera(K, np.zeros(4), frame_rate_hz=0.0)
     with pytest.raises(ValueError, match="outside the 752×480 image"):
         FisheyeCamera(K, np.zeros(4), bonnet=Bonnet.polygon([[0, 400], [800, 400], [0, 479]]))
+
+
+def test_pinhole_unproject_is_nan_past_the_distortion_turning_point() -> None:
+    """Strong barrel distortion folds back at the image corners: no ray reaches them."""
+    cam = PinholeCamera(PINHOLE_K, np.array([-0.45, 0.0, 0.0, 0.0, 0.0]))
+    rays = cam.unproject(np.array([[751.0, 0.0], [371.2, 243.9]]))
+    assert np.isnan(rays[0]).all() and np.isfinite(rays[1]).all()

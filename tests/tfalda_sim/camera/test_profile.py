@@ -212,3 +212,46 @@ def test_missing_file_unknown_name_and_folder(tmp_path: Path) -> None:
         load_camera(tmp_path)
     with pytest.raises(TypeError, match="profile name, a path or a Camera"):
         load_camera(3)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("content,match", [
+    (b"? [a, b]\n: 1\n", "a key that is a list"),
+    (b"image_width: 752\nimage_height: 480\ndistortion_model: [equidistant]\n",
+     "is not supported"),
+    (b"%YAML 1.1\n---\nwidth: 752\n", "neither 'format"),  # plain YAML, not OpenCV's
+    (b"%YAML:1.0\n---\nimage_width: .Nan\nimage_height: 480\ncamera_matrix: !!opencv-matrix\n"
+     b"   rows: 3\n   cols: 3\n   dt: d\n   data: [1., 0., 2., 0., 1., 2., 0., 0., 1.]\n"
+     b"distortion_coefficients: !!opencv-matrix\n   rows: 1\n   cols: 4\n   dt: d\n"
+     b"   data: [0., 0., 0., 0.]\n", "image_width must be a positive integer"),
+    (b"%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n"
+     b"   data: [1., 0., 2., 0., 1., 2., 0., 0., 1.]\n", "malformed OpenCV|not a readable"),
+])
+def test_hostile_camera_files(tmp_path: Path, content: bytes, match: str) -> None:
+    path = tmp_path / "cam.yaml"
+    path.write_bytes(content)
+    with pytest.raises(CameraFileError, match=match):
+        load_camera(path, mount=MOUNT)
+
+
+def test_a_huge_integer(tmp_path: Path) -> None:
+    path = _profile(tmp_path)
+    path.write_text(path.read_text().replace("frame_rate_hz: 30.0", "frame_rate_hz: " + "9" * 400))
+    with pytest.raises(CameraFileError, match="frame_rate_hz is too large"):
+        load_camera(path)
+
+
+def test_devices_are_not_read(tmp_path: Path) -> None:
+    with pytest.raises(CameraFileError, match="not a regular file"):
+        load_camera("/dev/zero")
+
+
+def test_pickled_cameras_stay_read_only_and_the_default_bonnet_follows_the_size() -> None:
+    import pickle
+
+    ref = pickle.loads(pickle.dumps(load_camera("reference-car")))
+    assert not ref.K.flags.writeable and not ref.bonnet.polygon_px.flags.writeable
+    K = np.array([[600.0, 0.0, 639.5], [0.0, 600.0, 399.5], [0.0, 0.0, 1.0]])
+    assert not FisheyeCamera(K, np.zeros(4), width=1280, height=800).bonnet.enabled
+    assert FisheyeCamera(FisheyeCamera.default().K, np.zeros(4)).bonnet.enabled
+    with pytest.raises(ValueError, match="top_row"):
+        FisheyeCamera(K, np.zeros(4), width=1280, height=800, bonnet=Bonnet(top_row=900.0))

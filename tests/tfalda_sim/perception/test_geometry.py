@@ -153,3 +153,13 @@ def test_pixel_numbers_scale_with_the_ground_resolution() -> None:
     assert cfg.layout.lambda_scale[0] == pytest.approx(
         px_per_m(base, LAMBDA_DISTANCES_M[0]) / LAMBDA_REFERENCE_PX_PER_M[0])
     assert cfg.lis.tolerance_scale[0] != pytest.approx(1.0, abs=0.05)
+
+
+def test_a_camera_without_a_bonnet_and_hough_for_it() -> None:
+    from tfalda_sim.perception import HoughConfig
+
+    cam = FisheyeCamera.default().replace(bonnet=Bonnet.none())
+    cfg = DetectorConfig.for_camera(cam)
+    assert cfg.layout.table_px == INITIAL_ROIS  # nothing to clip
+    hough = HoughConfig.for_camera(cam)
+    assert hough.car_mask == () and hough.crop_top_px + hough.crop_height_px == 480
