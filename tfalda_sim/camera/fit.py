@@ -27,11 +27,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from ..tracks.dimensions import LANE_WIDTH_M
 from .models import Camera, FisheyeCamera
 from .mount import CameraMount
-
-LANE_WIDTH_M: float = 0.400
-"""Line centre to line centre [m] (Carolo-Cup rules; ``tracks.dimensions``)."""
 
 MAX_MARKING_WIDTH_PX: int = 31
 """Widest marking the top-hat keeps [px]: a 20 mm line seen from 0.1 m at 300 px/rad is
@@ -128,7 +126,7 @@ def marking_pixels(frame: np.ndarray) -> np.ndarray:
     return np.column_stack([mid[keep], ys[keep]]).astype(np.float64)
 
 
-def _great_circles(rays: np.ndarray, pixels: np.ndarray, tol_rad: float,
+def _great_circles(rays: np.ndarray, tol_rad: float,
                    rng: np.random.Generator, max_lines: int = 8) -> list[tuple[np.ndarray,
                                                                                np.ndarray]]:
     """Sequential RANSAC: (normal, inlier index) of up to ``max_lines`` great circles."""
@@ -139,8 +137,6 @@ def _great_circles(rays: np.ndarray, pixels: np.ndarray, tol_rad: float,
             break
         r = rays[remaining]
         i = rng.integers(0, len(r), RANSAC_ITERATIONS)
-        # the second pixel near the first (a line's pixels are neighbours in the image)
-        d2 = np.sum((pixels[remaining][None, :40] - pixels[remaining][i][:, None]) ** 2, axis=2)
         j = rng.integers(0, len(r), RANSAC_ITERATIONS)
         n = np.cross(r[i], r[j])
         norm = np.linalg.norm(n, axis=1)
@@ -148,7 +144,6 @@ def _great_circles(rays: np.ndarray, pixels: np.ndarray, tol_rad: float,
         n = n[ok] / norm[ok, None]
         if not len(n):
             break
-        del d2
         counts = np.zeros(len(n), np.int64)
         for start in range(0, len(n), 100):
             counts[start:start + 100] = np.sum(np.abs(n[start:start + 100] @ r.T) < tol_rad,
@@ -253,7 +248,7 @@ def fit_mount(frame: np.ndarray, camera: Camera, *, points: list[np.ndarray] | N
         rays = camera.unproject(pix)
         ok = np.all(np.isfinite(rays), axis=1)
         rays, pix = rays[ok], pix[ok]
-        circles = _great_circles(rays, pix, tol, rng)
+        circles = _great_circles(rays, tol, rng)
         fits, direction = _road_lines(circles, rays, pix)
     return _finish(camera, fits, direction, forward_m, f_px)
 

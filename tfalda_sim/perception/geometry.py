@@ -23,12 +23,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..camera import Camera
+from ..tracks.dimensions import LANE_WIDTH_M
 
 Rect = tuple[int, int, int, int]
 """An image rectangle (x, y, width, height) [px]."""
 
-LANE_WIDTH_M: float = 0.400
-"""Lane width, line centre to line centre [m] (Carolo-Cup rules; ``tracks.dimensions``)."""
 
 THESIS_AGREEMENT_PX: float = 2.0
 """Largest difference [px] between table 2.4 / listing A.6 / listing 3.5 and their ground
