@@ -10,20 +10,24 @@ An unexpected error (a bug) also exits 1, with one line naming it.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import json
 import math
 import signal
 import sys
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, Generic, TypeVar
 
 from .interrupts import INTERRUPTS, ignoring_stops, is_interrupt, last_stop_signal
 from .outputs import DIRECTORY, Output, OutputError
 from .outputs import check_outputs as _check_outputs
-from .parallel import WorkerDied, resolve_workers
+from .parallel import BACKENDS, Backend, RayUnavailable, WorkerDied, import_ray, resolve_workers
 
 R = TypeVar("R")
+J = TypeVar("J")
 
 EXIT_OK: int = 0
 EXIT_NEGATIVE: int = 1
@@ -41,6 +45,7 @@ __all__ = [
     "CliError",
     "add_force_option",
     "add_json_option",
+    "add_sweep_options",
     "add_workers_option",
     "bounded_float_arg",
     "bounded_int_arg",
@@ -49,9 +54,11 @@ __all__ = [
     "interrupted",
     "positive_float_arg",
     "positive_int_arg",
+    "run_sweep",
     "seed_arg",
     "seed_range_arg",
     "speed_arg_for",
+    "sweep_backend",
     "workers_arg_value",
 ]
 
@@ -260,3 +267,237 @@ def sweep_exit(end: SweepEnd, kept: str) -> int:
     if end.interrupted:
         return interrupted(kept)
     return EXIT_OK
+
+
+# Sweeps: one set of options and one driver for every command that runs jobs over a seed
+# range (stress, evaluate --scenario random, compare, evaluate-agent, and any later one).
+
+SWEEP_HEADER_KEY = "tfalda_sim_sweep"
+"""The key of a results file's first line: the command that wrote it."""
+
+SWEEP_FORMAT = 1
+"""The results file's format version (a different one is refused by --resume)."""
+
+
+def add_sweep_options(parser: argparse.ArgumentParser, what: str = "jobs") -> None:
+    """``--workers``, ``--backend local|ray``, ``--ray-address``, ``--results F.jsonl`` and
+    ``--resume``: the options of every sweep (checked by ``check_sweep_options``)."""
+    add_workers_option(parser, what)
+    parser.add_argument("--backend", choices=BACKENDS, default="local",
+                        help="where the jobs run: local processes (default) or Ray (the "
+                             "optional extra: pip install 'tfalda-sim[ray]')")
+    parser.add_argument("--ray-address", metavar="ADDR",
+                        help="with --backend ray: a running Ray cluster (default: start a "
+                             "local Ray with --workers CPUs for this sweep)")
+    parser.add_argument("--results", type=Path, metavar="F.jsonl",
+                        help="stream each finished job's result to this JSON Lines file (first "
+                             "line: the sweep's configuration), so --resume can continue it")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue the interrupted sweep in --results: its finished jobs "
+                             "are kept, not redone (same options needed; the report files "
+                             "are replaced)")
+    parser.set_defaults(sweep_parser=parser)
+
+
+def check_sweep_options(args: argparse.Namespace) -> None:
+    """Contradictory sweep options refused at the parser (usage and exit 2); a
+    ``--resume`` whose ``--results`` file is missing refused with ``CliError``."""
+    error = args.sweep_parser.error
+    if args.ray_address is not None and args.backend != "ray":
+        error("--ray-address names a Ray cluster: it needs --backend ray")
+    if args.resume and args.results is None:
+        error("--resume continues the sweep saved in --results F.jsonl: give that file")
+    if args.resume and getattr(args, "force", False):
+        error("--resume continues --results and replaces the report it had; --force starts "
+              "afresh over it: give one of them")
+    if args.resume and not args.results.is_file():
+        raise CliError(f"--resume: {args.results} is not a file (nothing to resume); run "
+                       "without --resume to start the sweep")
+
+
+def sweep_backend(args: argparse.Namespace, jobs: int) -> Backend[Any, Any]:
+    """The backend of ``--backend``/``--ray-address``/``--workers`` for ``jobs`` jobs.
+    Local and a local Ray: ``--workers`` capped (``workers_arg_value``); a Ray cluster:
+    ``--workers`` as given (default its CPUs). Raises ``CliError`` without Ray."""
+    if args.backend == "ray":
+        try:
+            import_ray()
+        except RayUnavailable as exc:
+            raise CliError(str(exc)) from None
+        if args.ray_address is not None:
+            return Backend("ray", args.workers, args.ray_address)
+        return Backend("ray", workers_arg_value(args.workers, max(jobs, 1)))
+    return Backend("local", workers_arg_value(args.workers, max(jobs, 1)))
+
+
+def resume_hint(args: argparse.Namespace) -> str:
+    """What to tell an interrupted sweep's user about continuing it."""
+    if args.results is None:
+        return ""
+    return f"; --resume with the same options continues it from {args.results}"
+
+
+@dataclass(frozen=True)
+class SweepSpec(Generic[J]):
+    """A sweep as ``run_sweep`` runs it: ``fn`` (a picklable top-level function, the same
+    for every backend) over ``jobs`` (pulled lazily, ``total`` of them); ``record`` turns a
+    job's result into its JSON record (a line of ``--results``), ``check`` raises
+    ValueError when a stored record is not that job's. ``command`` and ``config`` (JSON
+    values by option name) make the results file's header: ``--resume`` refuses a file
+    of another command or configuration."""
+
+    command: str
+    config: Mapping[str, Any]
+    jobs: Iterable[J]
+    total: int
+    fn: Callable[[J], Any]
+    record: Callable[[J, Any], dict[str, Any]]
+    check: Callable[[J, dict[str, Any]], None]
+
+    def header(self) -> dict[str, Any]:
+        return {SWEEP_HEADER_KEY: self.command, "format": SWEEP_FORMAT,
+                "config": dict(self.config), "jobs": self.total}
+
+
+def _show(value: Any) -> str:
+    return "(not given)" if value is None else json.dumps(value)
+
+
+def read_results(path: Path, spec: SweepSpec[Any]) -> Iterator[tuple[int, dict[str, Any]]]:
+    """The records of a results file as (line number, record), after checking its header
+    against ``spec`` now (``CliError`` naming the mismatch). An incomplete last line (a
+    write cut off) is dropped with a note: its job runs again; any other bad line is an
+    error naming it."""
+    try:
+        fh = open(path, "rb")  # closed by the generator below (or on an error here)
+    except OSError as exc:
+        raise CliError(f"--resume: cannot read {path}: {exc.strerror or exc}") from None
+    try:
+        head = json.loads(fh.readline().decode("utf-8"))
+    except (ValueError, UnicodeDecodeError):
+        head = None
+    if not isinstance(head, dict) or not isinstance(head.get(SWEEP_HEADER_KEY), str):
+        fh.close()
+        raise CliError(f"--resume: {path} does not start with a sweep header: it is not a "
+                       "--results file of tfalda-sim; start afresh without --resume")
+    problems = []
+    if head[SWEEP_HEADER_KEY] != spec.command:
+        problems.append(f"it holds `tfalda-sim {head[SWEEP_HEADER_KEY]}` results, this is "
+                        f"`tfalda-sim {spec.command}`")
+    elif head.get("format") != SWEEP_FORMAT:
+        problems.append(f"its format is {_show(head.get('format'))}, this version reads "
+                        f"{SWEEP_FORMAT}")
+    else:
+        theirs = head.get("config") if isinstance(head.get("config"), dict) else {}
+        ours = json.loads(json.dumps(dict(spec.config)))
+        for key in sorted(set(theirs) | set(ours)):
+            if theirs.get(key) != ours.get(key):
+                problems.append(f"--{key.replace('_', '-')} was {_show(theirs.get(key))}, "
+                                f"now {_show(ours.get(key))}")
+    if problems:
+        fh.close()
+        raise CliError(f"--resume: {path} is from another sweep: {'; '.join(problems)}. "
+                       "Give the options it was started with, or start afresh without "
+                       "--resume")
+
+    def records() -> Iterator[tuple[int, dict[str, Any]]]:
+        with fh:
+            for n, raw in enumerate(fh, start=2):
+                try:
+                    rec = json.loads(raw.decode("utf-8"))
+                except (ValueError, UnicodeDecodeError):
+                    if not raw.endswith(b"\n"):  # the last line, cut off mid-write
+                        print(f"note: --resume: dropped the incomplete last line {n} of "
+                              f"{path}; its job runs again", file=sys.stderr)
+                        return
+                    raise CliError(f"--resume: {path} line {n} is not JSON: the file is "
+                                   "damaged; start afresh without --resume") from None
+                if not isinstance(rec, dict):
+                    raise CliError(f"--resume: {path} line {n} is not a result record; "
+                                   "start afresh without --resume")
+                yield n, rec
+
+    return records()
+
+
+_END = object()
+
+
+def run_sweep(spec: SweepSpec[J], backend: Backend[Any, Any],
+              handle: Callable[[dict[str, Any]], None], *, results: Path | None = None,
+              resume: Iterator[tuple[int, dict[str, Any]]] | None = None,
+              progress: bool = True, desc: str = "jobs", unit: str = "job",
+              on_result: Callable[[J, Any], None] | None = None) -> SweepEnd:
+    """Run a sweep: the records of ``resume`` (``read_results``) first, in place of the
+    jobs they finished, then the remaining jobs on ``backend``. Every record (JSON
+    round-tripped, so a resumed sweep sees exactly what an uninterrupted one does) goes
+    to ``handle`` and, with the header first, to ``results`` (a path to write, e.g. a
+    staged temporary file), flushed at once; a fresh result also to ``on_result`` (side
+    outputs that need more than the record). A tqdm bar counts finished jobs. Returns how
+    the sweep ended (``consume``)."""
+    jobs = iter(spec.jobs)
+    in_flight: deque[J] = deque()  # the jobs handed to the backend, oldest first
+
+    def items() -> Iterator[tuple[J, str, dict[str, Any], Any, int]]:
+        for n, rec in resume or ():
+            job = next(jobs, _END)
+            if job is _END:
+                raise CliError(f"--resume: line {n} is past the sweep's {spec.total} jobs: "
+                               "the file is not this sweep's results")
+            try:
+                spec.check(job, rec)  # type: ignore[arg-type]
+            except (ValueError, TypeError, KeyError) as exc:
+                raise CliError(f"--resume: line {n}: {exc}; the file is not this sweep's "
+                               "results") from None
+            yield job, json.dumps(rec), rec, None, n  # type: ignore[misc]
+        first = next(jobs, _END)
+        if first is _END:  # all done: no backend to start
+            return
+        jobs_left = _prepend(first, jobs)
+        for result in backend.stream(spec.fn, _pulled_from(jobs_left, in_flight)):
+            job = in_flight.popleft()
+            line = json.dumps(spec.record(job, result))
+            yield job, line, json.loads(line), result, 0
+
+    with contextlib.ExitStack() as stack:
+        fh = stack.enter_context(open(results, "w", encoding="utf-8")) if results else None
+        if fh is not None:
+            fh.write(json.dumps(spec.header()) + "\n")
+            fh.flush()
+        bar = stack.enter_context(_tqdm(total=spec.total, desc=desc, unit=unit,
+                                        disable=not progress))
+
+        def keep(item: tuple[J, str, dict[str, Any], Any, int]) -> None:
+            job, line, rec, result, n = item
+            try:
+                handle(rec)
+            except (ValueError, TypeError, KeyError) as exc:
+                if n == 0:
+                    raise
+                raise CliError(f"--resume: line {n} is not a valid result ({exc}); the file "
+                               "is not this sweep's results") from None
+            if fh is not None:
+                fh.write(line + "\n")
+                fh.flush()  # a finished job is on disk at once
+            if result is not None and on_result is not None:
+                on_result(job, result)
+            bar.update()
+
+        return consume(items(), keep)
+
+
+def _prepend(first: J, rest: Iterator[J]) -> Iterator[J]:
+    yield first
+    yield from rest
+
+
+def _pulled_from(jobs: Iterator[J], in_flight: deque[J]) -> Iterator[J]:
+    for job in jobs:
+        in_flight.append(job)
+        yield job
+
+
+def _tqdm(**kwargs: Any) -> Any:
+    from tqdm import tqdm
+
+    return tqdm(**kwargs)

@@ -9,12 +9,17 @@ Workers ignore Ctrl-C (the parent handles it: it stops submitting, cancels what 
 queued and terminates the workers), die with their parent (Linux ``PR_SET_PDEATHSIG``,
 and a check of the parent's pid at start-up), and are capped by ``resolve_workers`` at
 the number of jobs, the CPUs this process may use and the memory available.
+
+``ray_stream`` is the same contract on Ray (the optional ``ray`` extra): the same job
+function, the same bounded window of tasks in flight, results in job order. ``Backend``
+picks one of the two; every sweep command goes through it (``--backend local|ray``).
 """
 
 from __future__ import annotations
 
 import contextlib
 import ctypes
+import logging
 import multiprocessing
 import os
 import signal
@@ -23,7 +28,8 @@ from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from typing import TypeVar
+from dataclasses import dataclass
+from typing import Any, Generic, Literal, TypeVar
 
 J = TypeVar("J")
 R = TypeVar("R")
@@ -166,3 +172,130 @@ def stream(fn: Callable[[J], R], jobs: Iterable[J], *, workers: int = 1) -> Iter
             pool.shutdown(wait=True)
         else:
             _terminate(pool)
+
+
+BACKENDS: tuple[str, ...] = ("local", "ray")
+"""Where a sweep's jobs run: this machine's process pool, or Ray (a local Ray started for
+the sweep, or a running cluster at ``--ray-address``)."""
+
+RAY_EXTRA_HINT = "pip install 'tfalda-sim[ray]'"
+"""How to get Ray: the optional extra."""
+
+RAY_POLL_S: float = 0.2
+"""How long one ``ray.wait`` blocks: short, so that a Ctrl-C is seen at once."""
+
+
+class RayUnavailable(RuntimeError):
+    """``--backend ray`` without Ray installed, or a cluster that cannot be reached."""
+
+
+def import_ray() -> Any:
+    """The ``ray`` module, or ``RayUnavailable`` naming the extra to install."""
+    try:
+        import ray
+    except ImportError:
+        raise RayUnavailable(f"--backend ray needs Ray, the optional extra: "
+                             f"{RAY_EXTRA_HINT}") from None
+    return ray
+
+
+def _call(fn: Callable[[J], R], job: J) -> R:
+    """A Ray task: the job function, the very one the local pool runs."""
+    return fn(job)
+
+
+def _start_ray(ray: Any, workers: int | None, address: str | None) -> bool:
+    """Connect to ``address`` or start a local Ray with ``workers`` CPUs; True if this call
+    started (and so must shut down) it. An already connected Ray is used as it is."""
+    if ray.is_initialized():
+        return False
+    kwargs: dict[str, Any] = {"include_dashboard": False, "logging_level": logging.ERROR,
+                              "log_to_driver": False}
+    try:
+        if address is None:
+            ray.init(num_cpus=workers, **kwargs)
+        else:
+            ray.init(address=address, **kwargs)
+    except (ConnectionError, RuntimeError, ValueError) as exc:
+        where = f"the Ray cluster at {address}" if address else "a local Ray"
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise RayUnavailable(f"could not start {where}: {first}") from None
+    return True
+
+
+def ray_stream(fn: Callable[[J], R], jobs: Iterable[J], *, workers: int | None = None,
+               address: str | None = None) -> Iterator[R]:
+    """``stream`` on Ray: ``fn(job)`` as Ray tasks (``fn`` must pickle: a top-level
+    function or a ``functools.partial`` of one), results in job order, at most ``workers ×
+    IN_FLIGHT_PER_WORKER`` tasks in flight (``workers`` None: the cluster's CPUs). Starts a
+    local Ray with ``workers`` CPUs unless Ray is connected or ``address`` names a
+    cluster, and shuts down a Ray it started. Closing the generator early cancels the
+    tasks in flight. A task whose worker died raises ``WorkerDied``."""
+    if workers is not None and workers < 1:
+        raise ValueError(f"workers must be ≥ 1, got {workers}")
+    ray = import_ray()
+    from ray import exceptions as rex
+
+    started = _start_ray(ray, workers, address)
+    pending: deque[Any] = deque()
+    try:
+        if workers is None:
+            workers = max(1, int(ray.cluster_resources().get("CPU", 1)))
+        task = ray.remote(num_cpus=1, max_retries=0)(_call)
+        fn_ref = ray.put(fn)  # shipped once, not with every task
+        it = iter(jobs)
+        limit = workers * IN_FLIGHT_PER_WORKER
+        for job in it:
+            pending.append(task.remote(fn_ref, job))
+            if len(pending) >= limit:
+                break
+        while pending:
+            # Wait on the oldest task only (results in job order), in short steps so a
+            # Ctrl-C is not stuck inside Ray.
+            while not ray.wait([pending[0]], timeout=RAY_POLL_S)[0]:
+                pass
+            try:
+                result = ray.get(pending.popleft())
+            except (rex.WorkerCrashedError, rex.NodeDiedError, rex.OutOfMemoryError,
+                    rex.RaySystemError) as exc:
+                raise WorkerDied(f"a Ray worker died ({type(exc).__name__}; killed, perhaps "
+                                 "for lack of memory: try fewer --workers)") from None
+            except rex.RayTaskError as exc:  # the job's own error, as the local pool gives
+                cause = exc.cause if isinstance(exc.cause, BaseException) else exc
+                raise cause from None
+            for job in it:
+                pending.append(task.remote(fn_ref, job))
+                break
+            yield result
+    finally:
+        for ref in pending:  # an early close: nothing more is wanted
+            with contextlib.suppress(Exception):
+                ray.cancel(ref, force=True)
+        if started:
+            ray.shutdown()
+
+
+@dataclass(frozen=True)
+class Backend(Generic[J, R]):
+    """Where a sweep runs: ``local`` (``stream``, ``workers`` processes) or ``ray``
+    (``ray_stream``; ``address`` a cluster, None a local Ray with ``workers`` CPUs;
+    ``workers`` None on a cluster: its CPUs). The same job function either way, results
+    in job order: a sweep's results do not depend on the backend."""
+
+    kind: Literal["local", "ray"] = "local"
+    workers: int | None = 1
+    address: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in BACKENDS:
+            raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {self.kind!r}")
+        if self.address is not None and self.kind != "ray":
+            raise ValueError("a Ray address needs the ray backend")
+        if self.kind == "local" and self.workers is None:
+            raise ValueError("the local backend needs a worker count")
+
+    def stream(self, fn: Callable[[J], R], jobs: Iterable[J]) -> Iterator[R]:
+        """``fn(job)`` for every job, results in job order, bounded jobs in flight."""
+        if self.kind == "ray":
+            return ray_stream(fn, jobs, workers=self.workers, address=self.address)
+        return stream(fn, jobs, workers=self.workers or 1)
