@@ -5,30 +5,27 @@ from __future__ import annotations
 
 import argparse
 import json
-from dataclasses import asdict, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
-
-from tqdm import tqdm
 
 from tfalda_sim.camera.command import add_camera_option, camera_input
 from tfalda_sim.cli_common import (
     DIRECTORY,
     CliError,
-    SweepEnd,
     add_force_option,
     add_json_option,
-    add_workers_option,
+    add_sweep_options,
     bounded_int_arg,
     check_outputs,
-    consume,
+    check_sweep_options,
     interrupted,
     positive_int_arg,
     seed_arg,
     seed_range_arg,
     speed_arg_for,
+    sweep_backend,
     sweep_exit,
-    workers_arg_value,
 )
 from tfalda_sim.interrupts import ignoring_stops
 from tfalda_sim.perception.command import check_camera_geometry
@@ -203,7 +200,7 @@ def _stress_parser(sub: Any) -> None:
                     help="generated tracks A:B")
     st.add_argument("--faults", default=",".join(FAULTS),
                     help=f"comma-separated subset of: {', '.join(FAULTS)}")
-    add_workers_option(st)
+    add_sweep_options(st, "runs")
     st.add_argument("--out", type=Path, default=Path("out/stress"),
                     help="folder for stress.jsonl, stress.json, stress.md and stress.png")
     add_camera_option(st)
@@ -213,42 +210,56 @@ def _stress_parser(sub: Any) -> None:
 
 
 def cmd_stress(args: argparse.Namespace) -> int:
+    from tfalda_sim.cli_common import SweepSpec, read_results, resume_hint, run_sweep
     from tfalda_sim.outputs import Outputs
 
     from .stress import (
         REPORT_FILES,
+        StressRun,
         StressTally,
+        battery_jobs,
         check_faults,
-        iter_battery,
+        check_run_record,
         markdown_table,
         plot,
         report_document,
+        run_job,
+        run_record,
     )
 
+    check_sweep_options(args)
     try:
         faults = check_faults([f.strip() for f in args.faults.split(",") if f.strip()])
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    check_outputs({"out": args.out}, {"out": DIRECTORY}, args.force,
+    # --resume replaces the report of the run it continues (and its --results file).
+    check_outputs({"out": args.out, "results": args.results},
+                  {"out": DIRECTORY, "results": ".jsonl"}, args.force or args.resume,
                   files_in={"out": REPORT_FILES.values()},
                   inputs={"camera": camera_input(args.camera)})
     check_camera_geometry(args.camera)
     jobs = len(args.seeds) * len(faults) * 2
-    workers = workers_arg_value(args.workers, jobs)
+    spec = SweepSpec(command="stress",
+                     config={"seeds": f"{args.seeds.start}:{args.seeds.stop}",
+                             "faults": faults, "camera": args.camera},
+                     jobs=battery_jobs(args.seeds, faults, args.camera), total=jobs,
+                     fn=run_job, record=run_record, check=check_run_record)
+    resume = read_results(args.results, spec) if args.resume else None
+    backend = sweep_backend(args, jobs)
     tally = StressTally()
     with Outputs() as outs:
         files = {k: outs.path(args.out / name) for k, name in REPORT_FILES.items()}
-        with open(files["jsonl"], "w", encoding="utf-8") as fh, \
-                tqdm(total=jobs, desc="stress", unit="run", disable=args.json) as bar:
+        with open(files["jsonl"], "w", encoding="utf-8") as fh:
 
-            def keep(run: Any) -> None:
-                fh.write(json.dumps(asdict(run)) + "\n")
+            def keep(rec: dict[str, Any]) -> None:
+                run = StressRun(**rec)
+                fh.write(json.dumps(rec) + "\n")
                 fh.flush()  # a finished run is on disk at once
                 tally.add(run)
-                bar.update()
 
-            end = consume(iter_battery(args.seeds, faults, workers=workers,
-                                       camera=args.camera), keep)
+            end = run_sweep(spec, backend, keep, resume=resume, progress=not args.json,
+                            results=None if args.results is None else outs.path(args.results),
+                            desc="stress", unit="run")
         rows = tally.rows()
         if not rows:
             outs.abort()
@@ -268,7 +279,7 @@ def cmd_stress(args: argparse.Namespace) -> int:
         print(markdown_table(rows))
         print(f"wrote {args.out}/: {written}")
     return sweep_exit(end, f"kept the {tally.runs} of {jobs} runs that had finished and "
-                           f"their summary in {args.out}/ ({written})")
+                           f"their summary in {args.out}/ ({written})" + resume_hint(args))
 
 
 def _speeds_arg(text: str) -> tuple[float, ...]:
@@ -293,7 +304,7 @@ def _evaluate_agent_parser(sub: Any) -> None:
     ev.add_argument("--laps", type=bounded_int_arg(1, 1000), default=3)
     ev.add_argument("--speeds", type=_speeds_arg, default=(1.5,),
                     help="comma-separated cruise speeds [m/s], each in (0, top speed]")
-    add_workers_option(ev)
+    add_sweep_options(ev, "runs")
     add_camera_option(ev)
     ev.add_argument("--out", type=Path, help="also write the JSON here")
     add_force_option(ev, "an existing --out")
@@ -302,12 +313,22 @@ def _evaluate_agent_parser(sub: Any) -> None:
 
 
 def cmd_evaluate_agent(args: argparse.Namespace) -> int:
-    from tfalda_sim.outputs import staged
+    from tfalda_sim.cli_common import SweepSpec, read_results, resume_hint, run_sweep
+    from tfalda_sim.outputs import Outputs
 
     from .drive import make_agent
-    from .evaluate import evaluate
+    from .evaluate import (
+        check_run_record,
+        evaluation_jobs,
+        result_document,
+        run_job,
+        run_record,
+    )
 
-    check_outputs({"out": args.out}, {"out": ".json"}, args.force,
+    check_sweep_options(args)
+    # --resume replaces the report of the run it continues (and its --results file).
+    check_outputs({"out": args.out, "results": args.results},
+                  {"out": ".json", "results": ".jsonl"}, args.force or args.resume,
                   inputs={"policy": args.policy, "camera": camera_input(args.camera)})
     check_camera_geometry(args.camera)
     try:
@@ -315,16 +336,31 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
     except (ValueError, FileNotFoundError, ImportError) as exc:
         raise CliError(str(exc)) from None
     jobs = len(args.seeds) * len(args.speeds)
-    workers = workers_arg_value(args.workers, jobs)
-    result = evaluate(args.agent, args.seeds, laps=args.laps, speeds=args.speeds,
-                      policy=None if args.policy is None else str(args.policy),
-                      workers=workers, progress=not args.json, camera=args.camera)
-    end = SweepEnd(interrupted=result["interrupted"], worker_died=result["worker_died"])
-    if not result["runs"]:
-        return sweep_exit(end, "no run had finished; nothing written")
-    if args.out:
-        with ignoring_stops(), staged(args.out) as (tmp,):
-            tmp.write_text(json.dumps(result, indent=1), encoding="utf-8")
+    policy = None if args.policy is None else str(args.policy)
+    spec = SweepSpec(command="evaluate-agent",
+                     config={"agent": args.agent, "policy": policy,
+                             "seeds": f"{args.seeds.start}:{args.seeds.stop}",
+                             "laps": args.laps, "speeds": list(args.speeds),
+                             "camera": args.camera},
+                     jobs=evaluation_jobs(args.agent, policy, args.seeds, args.laps,
+                                          args.speeds, args.camera),
+                     total=jobs, fn=run_job, record=run_record, check=check_run_record)
+    resume = read_results(args.results, spec) if args.resume else None
+    backend = sweep_backend(args, jobs)
+    runs: list[dict[str, Any]] = []
+    with Outputs() as outs:
+        end = run_sweep(spec, backend, runs.append, resume=resume, progress=not args.json,
+                        results=None if args.results is None else outs.path(args.results),
+                        desc=args.agent, unit="run")
+        if not runs:
+            outs.abort()
+            return sweep_exit(end, "no run had finished; nothing written")
+        with ignoring_stops():  # a second Ctrl-C must not lose the first one's results
+            result = result_document(args.agent, policy, args.camera, args.laps, args.seeds,
+                                     args.speeds, runs, end.interrupted, end.worker_died)
+            if args.out:
+                outs.path(args.out).write_text(json.dumps(result, indent=1), encoding="utf-8")
+            outs.commit()
     if args.json:
         print(json.dumps(result))
     else:
@@ -334,7 +370,9 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
             print(f"{r['speed_m_s']:>6.2f} m/s{r['successes']:>5}/{r['tracks']:<4}"
                   f"{r['mean_abs_cross_track_m'] * 100:>8.1f}cm"
                   f"{r['roi_resets_per_track']:>12.2f}")
-        if args.out:
-            print(f"wrote {args.out}")
-    return sweep_exit(end, f"kept the {len(result['runs'])} of {jobs} runs that had finished"
-                           + (f" ({args.out})" if args.out else ""))
+        for path in (args.out, args.results):
+            if path:
+                print(f"wrote {path}")
+    files = [str(p) for p in (args.out, args.results) if p]
+    return sweep_exit(end, f"kept the {len(runs)} of {jobs} runs that had finished"
+                           + (f" ({', '.join(files)})" if files else "") + resume_hint(args))

@@ -28,7 +28,9 @@ from .drive import drive, make_agent
 Job = tuple[str, str | None, int, int, float, str]
 
 
-def _one(job: Job) -> dict[str, Any]:
+def run_job(job: Job) -> dict[str, Any]:
+    """One run (agent, policy, seed, laps, speed, camera): the picklable top-level
+    function every backend runs; its result is its JSON record."""
     kind, policy, seed, laps, speed, camera_spec = job
     track = replace(generate(seed), obstacles=())  # lane keeping: no cartons to avoid
     camera = load_camera(camera_spec)
@@ -40,8 +42,10 @@ def _one(job: Job) -> dict[str, Any]:
             **{k: v for k, v in result.summary().items() if k != "track"}}
 
 
-def _jobs(kind: str, policy: str | None, seeds: range, laps: int,
-          speeds: tuple[float, ...], camera: str) -> Iterator[Job]:
+def evaluation_jobs(kind: str, policy: str | None, seeds: range, laps: int,
+                    speeds: tuple[float, ...], camera: str) -> Iterator[Job]:
+    """The runs, generated as they are needed: every seed at the first speed, then at the
+    next."""
     for speed in speeds:
         for seed in seeds:
             yield kind, policy, seed, laps, speed, camera
@@ -53,7 +57,34 @@ def iter_evaluate(kind: str, seeds: range, *, laps: int = 3,
     """One run per (speed, seed), streamed from ``workers`` processes in that order;
     ``camera`` a profile name or file (the workers load it)."""
     make_agent(kind, policy, load_camera(camera))  # fail early on a bad agent or camera
-    yield from stream(_one, _jobs(kind, policy, seeds, laps, speeds, camera), workers=workers)
+    yield from stream(run_job, evaluation_jobs(kind, policy, seeds, laps, speeds, camera),
+                      workers=workers)
+
+
+def run_record(job: Job, run: dict[str, Any]) -> dict[str, Any]:
+    """A run's JSON record (a line of ``--results``): the run itself."""
+    return run
+
+
+def check_run_record(job: Job, rec: dict[str, Any]) -> None:
+    """A stored record is ``job``'s run, else ValueError."""
+    seed, speed = job[2], job[4]
+    if (rec.get("seed"), rec.get("speed_m_s")) != (seed, speed):
+        raise ValueError(f"it holds the run (seed, speed) {(rec.get('seed'), rec.get('speed_m_s'))}"
+                         f", the sweep's next run is {(seed, speed)}")
+    missing = {"success", "mean_abs_cross_track_m", "roi_resets"} - set(rec)
+    if missing:
+        raise ValueError(f"it lacks {', '.join(sorted(missing))}")
+
+
+def result_document(kind: str, policy: str | None, camera: str, laps: int, seeds: range,
+                    speeds: tuple[float, ...], runs: list[dict[str, Any]],
+                    interrupted: bool, worker_died: str | None) -> dict[str, Any]:
+    """The evaluation's result: per speed the success rate and figures, and every run."""
+    return {"agent": kind, "policy": policy, "camera": camera, "laps": laps,
+            "seeds": [seeds.start, seeds.stop],
+            "speeds": summarise(runs, speeds), "runs": runs, "interrupted": interrupted,
+            "worker_died": worker_died}
 
 
 def summarise(runs: list[dict[str, Any]], speeds: tuple[float, ...]) -> list[dict[str, Any]]:
@@ -92,7 +123,5 @@ def evaluate(kind: str, seeds: range, *, laps: int = 3, speeds: tuple[float, ...
 
         end = consume(iter_evaluate(kind, seeds, laps=laps, speeds=speeds, policy=policy,
                                     workers=n, camera=camera), keep)
-    return {"agent": kind, "policy": policy, "camera": camera, "laps": laps,
-            "seeds": [seeds.start, seeds.stop],
-            "speeds": summarise(runs, speeds), "runs": runs, "interrupted": end.interrupted,
-            "worker_died": end.worker_died}
+    return result_document(kind, policy, camera, laps, seeds, speeds, runs, end.interrupted,
+                           end.worker_died)

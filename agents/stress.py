@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -187,8 +187,31 @@ def _tightest_curve_start(track: Track) -> float:
     return float(t.s0[k])
 
 
-def _run(args: tuple[int, str, bool, str]) -> StressRun:
-    return run_one(*args)
+StressJob = tuple[int, str, bool, str]
+"""(seed, fault, reset stage on, camera): one run of the battery."""
+
+
+def run_job(job: StressJob) -> StressRun:
+    """One job of the battery: the picklable top-level function every backend runs."""
+    return run_one(*job)
+
+
+def run_record(job: StressJob, run: StressRun) -> dict[str, Any]:
+    """A run as its JSON record (a line of stress.jsonl and of ``--results``)."""
+    return asdict(run)
+
+
+def check_run_record(job: StressJob, rec: dict[str, Any]) -> None:
+    """A stored record belongs to ``job`` and reads back as a ``StressRun``, else
+    ValueError."""
+    seed, fault, stage, _ = job
+    got = (rec.get("seed"), rec.get("fault"), rec.get("roi_reset_stage"))
+    if got != (seed, fault, stage):
+        raise ValueError(f"it holds the run (seed, fault, reset stage) {got}, the sweep's "
+                         f"next run is {(seed, fault, stage)}")
+    if set(rec) != {f.name for f in fields(StressRun)}:
+        raise ValueError(f"its fields are {sorted(rec)}, a run has "
+                         f"{sorted(f.name for f in fields(StressRun))}")
 
 
 def check_faults(faults: Sequence[str] | None) -> list[str]:
@@ -217,7 +240,7 @@ def iter_battery(seeds: Iterable[int], faults: Sequence[str] | None = None, *,
     """Every fault × {with, without the reset stage} × seed, streamed from a process pool
     of ``workers`` (``tfalda_sim.parallel.stream``: bounded memory for any range, results
     in job order and independent of the worker count)."""
-    yield from stream(_run, battery_jobs(seeds, check_faults(faults), camera), workers=workers)
+    yield from stream(run_job, battery_jobs(seeds, check_faults(faults), camera), workers=workers)
 
 
 def run_battery(seeds: Sequence[int], faults: Sequence[str] | None = None, *,
