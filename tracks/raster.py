@@ -219,7 +219,14 @@ def _raster_kernel(
     start_w: float,
     stop_w: float,
     chunk_m: float,
+    todo: np.ndarray,
+    tile: int,
 ) -> None:
+    """Paint the pixels of the tiles marked in ``todo`` (``tile`` × ``tile`` px each).
+
+    Chunks and pixels are visited in the same order whatever the tiles, and every pixel's
+    value depends only on its own centre, so a tile painted alone equals the same tile of
+    the whole map, labels included."""
     n_rows, n_cols = intensity.shape
     half_road = lane_w + 0.5 * line_w
     pad = half_road + 2.0 * res
@@ -260,7 +267,10 @@ def _raster_kernel(
             c_hi = min(n_cols - 1, int(math.ceil((max(xa, xb, xm) + bow - ox) / res)))
             r_lo = max(0, int(math.floor((oy - max(ya, yb, ym) - bow) / res)))
             r_hi = min(n_rows - 1, int(math.ceil((oy - min(ya, yb, ym) + bow) / res)))
+            if not _any_tile(todo, tile, r_lo, r_hi, c_lo, c_hi):
+                continue
             for r in range(r_lo, r_hi + 1):
+                tile_row = todo[r // tile]
                 py = oy - (r + 0.5) * res
                 q_lo = c_lo
                 q_hi = c_hi
@@ -278,33 +288,129 @@ def _raster_kernel(
                         xb_ = x0[j] + (hi_v - base) / coef
                         q_lo = max(q_lo, int(math.floor((min(xa_, xb_) - ox) / res - 0.5)))
                         q_hi = min(q_hi, int(math.ceil((max(xa_, xb_) - ox) / res - 0.5)))
-                for q in range(q_lo, q_hi + 1):
-                    px = ox + (q + 0.5) * res
-                    if arc:
-                        vx = px - cx
-                        vy = py - cy
-                        d = sign * (radius - math.hypot(vx, vy))
-                        if abs(d) > pad or not (has_special or _near_line(d, lane_w, line_reach)):
-                            continue
-                        u = ((sign * (math.atan2(vy, vx) - phi0)) % (2.0 * math.pi)) * radius
-                    else:
-                        dx = px - x0[j]
-                        dy = py - y0[j]
-                        d = -dx * sh + dy * ch
-                        if abs(d) > pad or not (has_special or _near_line(d, lane_w, line_reach)):
-                            continue
-                        u = dx * ch + dy * sh
-                    if u < ua or u > ub or (u == ub and not last):
+                q_run = q_lo
+                while q_run <= q_hi:  # the row's runs through one tile each
+                    tc = q_run // tile
+                    q_end = min(q_hi, (tc + 1) * tile - 1)
+                    first = q_run
+                    q_run = q_end + 1
+                    if not tile_row[tc]:
                         continue
-                    s = s0[j] + u
-                    if closed and s >= total:
-                        s -= total
-                    _paint_pixel(intensity, labels, r, q, s, d, res, total, closed, lane_w, line_w,
-                                 dash, period, gap_line, gap_lo, gap_hi, passes, start_s,
-                                 start_w, stop_w)
+                    for q in range(first, q_end + 1):
+                        px = ox + (q + 0.5) * res
+                        if arc:
+                            vx = px - cx
+                            vy = py - cy
+                            d = sign * (radius - math.hypot(vx, vy))
+                            if abs(d) > pad or not (has_special
+                                                    or _near_line(d, lane_w, line_reach)):
+                                continue
+                            u = ((sign * (math.atan2(vy, vx) - phi0)) % (2.0 * math.pi)) * radius
+                        else:
+                            dx = px - x0[j]
+                            dy = py - y0[j]
+                            d = -dx * sh + dy * ch
+                            if abs(d) > pad or not (has_special
+                                                    or _near_line(d, lane_w, line_reach)):
+                                continue
+                            u = dx * ch + dy * sh
+                        if u < ua or u > ub or (u == ub and not last):
+                            continue
+                        s = s0[j] + u
+                        if closed and s >= total:
+                            s -= total
+                        _paint_pixel(intensity, labels, r, q, s, d, res, total, closed, lane_w,
+                                     line_w, dash, period, gap_line, gap_lo, gap_hi, passes,
+                                     start_s, start_w, stop_w)
 
 
 _LINE_INDEX = {"right": 0, "centre": 1, "left": 2}
+
+
+@njit(cache=True)
+def _any_tile(todo: np.ndarray, tile: int, r_lo: int, r_hi: int, c_lo: int, c_hi: int) -> bool:
+    """Whether a tile of ``todo`` meets the pixel box ``[r_lo, r_hi] × [c_lo, c_hi]``."""
+    for tr in range(r_lo // tile, r_hi // tile + 1):
+        for tc in range(c_lo // tile, c_hi // tile + 1):
+            if todo[tr, tc]:
+                return True
+    return False
+
+
+TILE_PX: int = 64
+"""Edge of a tile of a ``TiledMarkingMap`` [px] (25.6 cm at 4 mm/px): the unit painted on
+demand."""
+
+
+class TiledMarkingMap:
+    """A marking map painted tile by tile on demand (``fill``): a camera sees a few metres
+    of a track, so painting only what it looks at makes a new track cheap to show.
+
+    ``intensity`` and ``labels`` are full-size arrays from ``np.zeros`` (pages never
+    written cost no memory); a tile once painted holds exactly the values ``rasterize``
+    gives there. ``filled`` marks the painted tiles, ``(ceil(H / tile_px),
+    ceil(W / tile_px))`` uint8."""
+
+    def __init__(self, track: Track, resolution_m: float = DEFAULT_RESOLUTION_M,
+                 margin_m: float = dimensions.MAT_EDGE_MARGIN_M,
+                 tile_px: int = TILE_PX) -> None:
+        if not (math.isfinite(resolution_m) and resolution_m > 0):
+            raise ValueError(f"resolution_m must be > 0, got {resolution_m!r}")
+        if not (isinstance(tile_px, int) and tile_px > 0):
+            raise ValueError(f"tile_px must be a positive int, got {tile_px!r}")
+        xmin, ymin, xmax, ymax = track.bounds(margin_m)
+        n_cols = int(math.ceil((xmax - xmin) / resolution_m))
+        n_rows = int(math.ceil((ymax - ymin) / resolution_m))
+        if n_cols * n_rows > MAX_MAP_PIXELS:
+            raise ValueError(f"a {n_cols}×{n_rows} map is too large (more than MAX_MAP_PIXELS = "
+                             f"{MAX_MAP_PIXELS}: {math.sqrt(MAX_MAP_PIXELS) * resolution_m:.0f} m "
+                             f"square at {resolution_m * 1000:g} mm/px); use a coarser "
+                             "resolution_m")
+        self.track = track
+        self.origin_m = (xmin, ymax)
+        self.resolution_m = float(resolution_m)
+        self.tile_px = tile_px
+        self.intensity = np.zeros((n_rows, n_cols), dtype=np.uint8)
+        self.labels = np.zeros((n_rows, n_cols), dtype=np.uint8)
+        self.filled = np.zeros((-(-n_rows // tile_px), -(-n_cols // tile_px)), np.uint8)
+        t = track.table
+        gaps = track.gaps
+        passes = np.array([s for x in track.intersections for s in (x.s1_m, x.s2_m)],
+                          dtype=np.float64)
+        self._args = (
+            xmin, ymax, self.resolution_m,
+            t.x0, t.y0, t.h0, t.kappa, t.length, t.s0, track.length_m, track.closed,
+            track.lane_width_m, dimensions.LINE_WIDTH_M, dimensions.CENTRE_DASH_M,
+            dimensions.CENTRE_DASH_M + dimensions.CENTRE_DASH_GAP_M,
+            np.array([_LINE_INDEX[g.line.value] for g in gaps], dtype=np.int64),
+            np.array([g.s_m for g in gaps], dtype=np.float64),
+            np.array([g.s_m + g.length_m for g in gaps], dtype=np.float64),
+            passes,
+            math.nan if track.start_line_s_m is None else float(track.start_line_s_m),
+            dimensions.START_LINE_WIDTH_M, dimensions.STOP_LINE_WIDTH_M, CHUNK_M,
+        )
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.intensity.shape  # type: ignore[return-value]
+
+    @property
+    def complete(self) -> bool:
+        return bool(self.filled.all())
+
+    def fill(self, tiles: np.ndarray) -> None:
+        """Paint the tiles marked in ``tiles`` (a mask shaped like ``filled``) that are not
+        painted yet."""
+        todo = (np.asarray(tiles, dtype=bool) & (self.filled == 0)).astype(np.uint8)
+        if not todo.any():
+            return
+        _raster_kernel(self.intensity, self.labels, *self._args, todo, self.tile_px)
+        self.filled |= todo
+
+    def fill_all(self) -> MarkingMap:
+        """Paint every tile; the whole map."""
+        self.fill(np.ones(self.filled.shape, bool))
+        return MarkingMap(self.intensity, self.labels, self.origin_m, self.resolution_m)
 
 
 def rasterize(track: Track, resolution_m: float = DEFAULT_RESOLUTION_M,
@@ -314,31 +420,4 @@ def rasterize(track: Track, resolution_m: float = DEFAULT_RESOLUTION_M,
     The map covers the road plus ``margin_m`` [m] of mat on every side (the rules' 300 mm
     to the mat's edge by default).
     """
-    if not (math.isfinite(resolution_m) and resolution_m > 0):
-        raise ValueError(f"resolution_m must be > 0, got {resolution_m!r}")
-    xmin, ymin, xmax, ymax = track.bounds(margin_m)
-    n_cols = int(math.ceil((xmax - xmin) / resolution_m))
-    n_rows = int(math.ceil((ymax - ymin) / resolution_m))
-    if n_cols * n_rows > MAX_MAP_PIXELS:
-        raise ValueError(f"a {n_cols}×{n_rows} map is too large (more than MAX_MAP_PIXELS = "
-                         f"{MAX_MAP_PIXELS}: {math.sqrt(MAX_MAP_PIXELS) * resolution_m:.0f} m "
-                         f"square at {resolution_m * 1000:g} mm/px); use a coarser "
-                         "resolution_m")
-    intensity = np.zeros((n_rows, n_cols), dtype=np.uint8)
-    labels = np.zeros((n_rows, n_cols), dtype=np.uint8)
-    t = track.table
-    gaps = track.gaps
-    passes = np.array([s for x in track.intersections for s in (x.s1_m, x.s2_m)], dtype=np.float64)
-    _raster_kernel(
-        intensity, labels, xmin, ymax, resolution_m,
-        t.x0, t.y0, t.h0, t.kappa, t.length, t.s0, track.length_m, track.closed,
-        track.lane_width_m, dimensions.LINE_WIDTH_M, dimensions.CENTRE_DASH_M,
-        dimensions.CENTRE_DASH_M + dimensions.CENTRE_DASH_GAP_M,
-        np.array([_LINE_INDEX[g.line.value] for g in gaps], dtype=np.int64),
-        np.array([g.s_m for g in gaps], dtype=np.float64),
-        np.array([g.s_m + g.length_m for g in gaps], dtype=np.float64),
-        passes,
-        math.nan if track.start_line_s_m is None else float(track.start_line_s_m),
-        dimensions.START_LINE_WIDTH_M, dimensions.STOP_LINE_WIDTH_M, CHUNK_M,
-    )
-    return MarkingMap(intensity, labels, (xmin, ymax), float(resolution_m))
+    return TiledMarkingMap(track, resolution_m, margin_m).fill_all()

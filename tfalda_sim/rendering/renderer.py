@@ -292,6 +292,31 @@ def _pack_pieces(boxes: np.ndarray, reads: np.ndarray, cuts: np.ndarray
     return out, tex_at
 
 
+@njit(cache=True)
+def _level_bounds(rows: np.ndarray, cols: np.ndarray, widths: np.ndarray,
+                  coord_a: np.ndarray, coord_b: np.ndarray, level: np.ndarray,
+                  flags: np.ndarray, levels: int) -> np.ndarray:
+    """Per mip level, the car-frame box ``(x_min, x_max, y_min, y_max)`` [m] of the ground
+    hits of the pieces' pixels that read it (min > max where none does): what a lazy
+    scene must have filled before these pixels are sampled."""
+    out = np.empty((levels, 4))
+    out[:, 0] = out[:, 2] = math.inf
+    out[:, 1] = out[:, 3] = -math.inf
+    for t in range(len(rows)):
+        r = rows[t]
+        for c in range(cols[t], cols[t] + widths[t]):
+            if not flags[r, c] & 1:
+                continue
+            lv = level[r, c]
+            x = coord_a[r, c]
+            y = coord_b[r, c]
+            out[lv, 0] = min(out[lv, 0], x)
+            out[lv, 1] = max(out[lv, 1], x)
+            out[lv, 2] = min(out[lv, 2], y)
+            out[lv, 3] = max(out[lv, 3], y)
+    return out
+
+
 _PACK = 1024
 """Pixels per row of the packed buffers handed to ``cv2.remap``."""
 
@@ -316,6 +341,7 @@ class _Stack:
     zero_len: int
     out_len: int
     window_offsets: list[int]
+    level_bounds: np.ndarray  # (levels, 4): per mip level, car-frame box of the ground hits
 
 
 @dataclass(frozen=True)
@@ -330,6 +356,26 @@ class _Layout:
     flags: np.ndarray  # uint8: 1 ground, 2 bonnet, 4 ceiling
     reads_atlas: np.ndarray  # bool per pixel: not ceiling (a constant grey)
     cuts: np.ndarray  # per row: columns where reads_atlas switches, padded with the width
+    level: np.ndarray  # uint8: ground pixels' mip level
+    levels: int  # mip levels of the atlas
+
+
+@dataclass(frozen=True)
+class _PixelLayout:
+    """The part of a ``_Layout`` that does not depend on where the atlas puts its levels
+    and walls (cached per resolution, level count, hall and wall height): building it
+    is most of a layout's cost, and a new track moves its atlas's levels."""
+
+    coord_a: np.ndarray
+    coord_b: np.ndarray  # wall pixels still without the wall's atlas row
+    wall_index: np.ndarray  # flat indices of the wall pixels
+    wall_row: np.ndarray  # their row in the wall texture [texels] (float64)
+    code: np.ndarray  # uint8: level on the ground, levels on the walls, levels + 1 ceiling
+    scale: np.ndarray
+    flags: np.ndarray
+    reads_atlas: np.ndarray
+    cuts: np.ndarray
+    level: np.ndarray
 
 
 def _switch_columns(mask: np.ndarray) -> np.ndarray:
@@ -358,6 +404,7 @@ class Renderer:
         # up atlases); layouts and window packings are keyed by value and bounded.
         self._current: tuple[Scene, _Layout, BoxFaces, tuple] | None = None
         self._layouts: dict[tuple, _Layout] = {}
+        self._pixel_layouts: dict[tuple, _PixelLayout] = {}
         self._stacks: dict[tuple, _Stack] = {}
         self._effect_maps: dict[Effects, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._scratch: dict[tuple, np.ndarray] = {}
@@ -389,7 +436,17 @@ class Renderer:
     def _layout(self, scene: Scene) -> _Layout:
         return self._scene_data(scene)[0]
 
-    def _build_layout(self, scene: Scene) -> _Layout:
+    def _pixel_layout(self, scene: Scene) -> _PixelLayout:
+        key = (scene.resolution_m, scene.levels, scene.hall, scene.wall_size[1])
+        base = self._pixel_layouts.get(key)
+        if base is None:
+            base = self._build_pixel_layout(scene)
+            if len(self._pixel_layouts) >= 4:
+                self._pixel_layouts.pop(next(iter(self._pixel_layouts)))
+            self._pixel_layouts[key] = base
+        return base
+
+    def _build_pixel_layout(self, scene: Scene) -> _PixelLayout:
         g = self.geometry
         hall = scene.hall
         is_ground = g.rho < hall.distance_m
@@ -397,26 +454,51 @@ class Renderer:
         ceiling = ~is_ground & (z >= hall.height_m + 0.05)
         flags = (is_ground.astype(np.uint8) | (g.bonnet << 1)
                  | (ceiling.astype(np.uint8) << 2)).astype(np.uint8)
+        levels = scene.levels
         level = np.clip(np.rint(g.log2_fp - math.log2(scene.resolution_m)), 0,
-                        scene.levels - 1).astype(np.int64)
+                        levels - 1).astype(np.int64)
         level_scale = 0.5 ** level
-        origin = scene.level_origin
-        wall_rows = scene.wall_size[1]
+        wall = ~is_ground & ~ceiling
         wall_col = np.mod(g.azimuth.astype(np.float64), 2 * math.pi) * (
             hall.distance_m / WALL_TEXEL_M)
-        wall_row = np.clip(z / WALL_TEXEL_M, 0.0, wall_rows - 1.0) + scene.wall_origin[1]
+        wall_row = np.clip(z / WALL_TEXEL_M, 0.0, scene.wall_size[1] - 1.0)
         f32 = np.float32
-        return _Layout(
+        code = np.where(is_ground, level, np.where(ceiling, levels + 1, levels))
+        return _PixelLayout(
             coord_a=np.where(is_ground, g.gx, wall_col).astype(f32),
-            coord_b=np.where(is_ground, g.gy, np.where(ceiling, _PAD, wall_row)).astype(f32),
+            coord_b=np.where(is_ground, g.gy, _PAD).astype(f32),
+            wall_index=np.flatnonzero(wall),
+            wall_row=wall_row[wall],
+            code=code.astype(np.uint8),
             scale=np.where(is_ground, level_scale, 0.0).astype(f32),
-            bias_x=np.where(is_ground, 0.5 * level_scale - 0.5 + origin[level, 0],
-                            np.where(ceiling, _PAD, scene.wall_origin[0])).astype(f32),
-            bias_y=np.where(is_ground, 0.5 * level_scale - 0.5 + origin[level, 1], 0.0
-                            ).astype(f32),
             flags=flags,
             reads_atlas=flags != 4,
             cuts=_switch_columns(flags != 4),
+            level=np.where(is_ground, level, 0).astype(np.uint8),
+        )
+
+    def _build_layout(self, scene: Scene) -> _Layout:
+        """The scene's layout: the cached pixel layout plus where this atlas puts its
+        levels and walls (the same float64 sums as ever, rounded to float32 once)."""
+        base = self._pixel_layout(scene)
+        levels = scene.levels
+        origin = scene.level_origin
+        bias = np.zeros((2, levels + 2))
+        for lv in range(levels):
+            level_scale = 0.5 ** np.int64(lv)
+            bias[0, lv] = 0.5 * level_scale - 0.5 + origin[lv, 0]
+            bias[1, lv] = 0.5 * level_scale - 0.5 + origin[lv, 1]
+        bias[0, levels] = scene.wall_origin[0]
+        bias[0, levels + 1] = _PAD
+        bias32 = bias.astype(np.float32)
+        coord_b = base.coord_b.copy()
+        coord_b.reshape(-1)[base.wall_index] = (
+            base.wall_row + scene.wall_origin[1]).astype(np.float32)
+        return _Layout(
+            coord_a=base.coord_a, coord_b=coord_b, scale=base.scale,
+            bias_x=bias32[0][base.code], bias_y=bias32[1][base.code],
+            flags=base.flags, reads_atlas=base.reads_atlas, cuts=base.cuts,
+            level=base.level, levels=levels,
         )
 
     def _buffers(self, st: _Stack, with_light: bool
@@ -507,6 +589,13 @@ class Renderer:
         if blur:
             total = self._buffer("tex_sum", (n_tex + st.zero_len,), np.float32)
             total.fill(0.0)
+        if scene.tiles is not None and not scene.tiles.complete:
+            # A lazy scene fills what this view reads: the poses of the first and the last
+            # blur sample bound the boxes of all of them (one straight shift).
+            ends = {float(shifts[0]), float(shifts[-1])}
+            scene.prepare(st.level_bounds, np.array([
+                self._affine(scene, x - b * math.cos(yaw), y - b * math.sin(yaw), yaw)
+                for b in ends]))
         wall_shift = (yaw % (2 * math.pi)) * (scene.hall.distance_m / WALL_TEXEL_M)
         size_x, size_y = float(scene.level0_size[0]), float(scene.level0_size[1])
         for k, back in enumerate(shifts):
@@ -580,12 +669,16 @@ class Renderer:
         s_offsets = tex_offsets[sampled]
         tex_offsets[~sampled] = tex_rows * _PACK  # ceiling pieces read the zero tail
         window_offsets = np.cumsum([0] + [ww * wh for _, _, ww, wh in boxes[:-1]])
+        s_rows, s_cols, s_widths = rows[sampled], cols[sampled], widths[sampled]
         stack = _Stack(rows=rows, cols=cols, widths=widths, out_offsets=out_offsets,
-                       tex_offsets=tex_offsets, s_rows=rows[sampled], s_cols=cols[sampled],
-                       s_widths=widths[sampled], s_offsets=s_offsets, tex_rows=tex_rows,
+                       tex_offsets=tex_offsets, s_rows=s_rows, s_cols=s_cols,
+                       s_widths=s_widths, s_offsets=s_offsets, tex_rows=tex_rows,
                        zero_len=max(ww for _, _, ww, _ in boxes),
                        out_len=int(out_offsets[-1] + widths[-1]),
-                       window_offsets=window_offsets.tolist())
+                       window_offsets=window_offsets.tolist(),
+                       level_bounds=_level_bounds(s_rows, s_cols, s_widths, layout.coord_a,
+                                                  layout.coord_b, layout.level, layout.flags,
+                                                  layout.levels))
         if len(self._stacks) >= 32:
             self._stacks.pop(next(iter(self._stacks)))
         self._stacks[key] = stack

@@ -14,8 +14,10 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from numba import njit
 
 from tfalda_sim.tracks import MarkingMap, Track, rasterize
+from tfalda_sim.tracks.raster import TILE_PX, TiledMarkingMap
 from tfalda_sim.tracks.rules import obstacle_corners
 
 from .effects import Effects
@@ -28,6 +30,10 @@ WALL_TEXEL_M: float = 0.02
 
 ATLAS_GUARD: int = 4
 """Zero texels around every mip level in the atlas, so bilinear taps never bleed."""
+
+TILE_TEXELS: int = TILE_PX
+"""Edge of a level-0 tile of a lazy scene's atlas [texels] (the marking map's tile);
+level L's tiles cover the same ground, ``max(1, TILE_TEXELS >> L)`` texels."""
 
 MAX_ATLAS_SIDE_TEXELS: int = 32767
 """Longest side of the mip atlas [texels]: OpenCV's remap needs images below
@@ -64,10 +70,24 @@ class Scene:
     origin: tuple[float, float]  # world (x, y) of level 0's top-left corner [m]
     light: np.ndarray | None  # (h, w, 2) uint8: shadow gain ×255, glare [DN]; None: no light
     boxes: np.ndarray  # (n, 8, 3) obstacle corners [m]: 4 on the ground, 4 on top
+    tiles: MipTiles | None = None  # lazy scene: the marking tiles filled so far; None: all
 
     @property
     def levels(self) -> int:
         return len(self.level_origin)
+
+    def prepare(self, bounds: np.ndarray, affines: np.ndarray) -> None:
+        """Fill the atlas under a view before it is sampled (a no-op once all is filled):
+        ``bounds`` ``(levels, 4)`` per mip level the car-frame box ``(x_min, x_max, y_min,
+        y_max)`` [m] of the ground hits read at that level (empty: min > max); ``affines``
+        ``(k, 6)`` the car poses' maps car frame → level-0 texels (see ``Renderer``)."""
+        if self.tiles is not None and not self.tiles.complete:
+            self.tiles.ensure(bounds, affines)
+
+    def fill_all(self) -> None:
+        """Fill every tile: the atlas becomes the eager scene's."""
+        if self.tiles is not None:
+            self.tiles.fill_all()
 
 
 def _atlas(level0: np.ndarray, wall: np.ndarray, min_size: int = 8
@@ -103,6 +123,191 @@ def _atlas(level0: np.ndarray, wall: np.ndarray, min_size: int = 8
     return atlas, np.array(origins[:-1], np.float32), origins[-1]
 
 
+def _level_sizes(shape0: tuple[int, int], min_size: int = 8) -> list[tuple[int, int]]:
+    """``(rows, cols)`` of every mip level, as ``_atlas`` makes them."""
+    sizes = [shape0]
+    while min(sizes[-1]) // 2 >= min_size and len(sizes) < 10:
+        sizes.append((sizes[-1][0] // 2, sizes[-1][1] // 2))
+    return sizes
+
+
+def _atlas_layout(shape0: tuple[int, int], wall_shape: tuple[int, int]
+                  ) -> tuple[tuple[int, int], list[tuple[int, int]], list[tuple[int, int]],
+                             tuple[int, int]]:
+    """``_atlas``'s packing without the data: atlas ``(height, width)``, level sizes
+    ``(rows, cols)``, level origins ``(x, y)`` and the wall texture's origin."""
+    sizes = _level_sizes(shape0)
+    g = ATLAS_GUARD
+    column = [*sizes[1:], (wall_shape[0], wall_shape[1] + 1)]
+    right_w = max(c for _, c in column) + 2 * g
+    right_h = sum(r + 2 * g for r, _ in column)
+    height = max(shape0[0] + 2 * g, right_h)
+    width = shape0[1] + 2 * g + right_w
+    if max(height, width) >= MAX_ATLAS_SIDE_TEXELS:
+        raise ValueError(f"marking map too large for the renderer ({width}×{height} texels); "
+                         "use a coarser resolution")
+    origins = [(g, g)]
+    x, y = shape0[1] + 3 * g, g
+    for r, _ in column:
+        origins.append((x, y))
+        y += r + 2 * g
+    return (height, width), sizes, origins[:-1], origins[-1]
+
+
+@njit(cache=True)
+def _mark_needed(bounds: np.ndarray, affines: np.ndarray, size0_x: float, size0_y: float,
+                 sizes: np.ndarray, tile: np.ndarray, grids: np.ndarray, offsets: np.ndarray,
+                 filled: np.ndarray, need: np.ndarray) -> int:
+    """Mark in ``need`` the unfilled tiles that bilinear taps of a view may read (see
+    ``Scene.prepare``); returns how many. Conservative: the level-0 texel box of the
+    ground hits, clamped like the renderer's maps, then two texels more at each level."""
+    count = 0
+    for lv in range(sizes.shape[0]):
+        if bounds[lv, 0] > bounds[lv, 1]:
+            continue  # no pixel reads this level
+        x_lo = math.inf
+        x_hi = -math.inf
+        y_lo = math.inf
+        y_hi = -math.inf
+        for k in range(affines.shape[0]):
+            a = affines[k]
+            for gx in (bounds[lv, 0], bounds[lv, 1]):
+                for gy in (bounds[lv, 2], bounds[lv, 3]):
+                    x = min(max(a[0] * gx + a[1] * gy + a[2], -2.0), size0_x + 1.0)
+                    y = min(max(a[3] * gx + a[4] * gy + a[5], -2.0), size0_y + 1.0)
+                    x_lo = min(x_lo, x)
+                    x_hi = max(x_hi, x)
+                    y_lo = min(y_lo, y)
+                    y_hi = max(y_hi, y)
+        scale = 0.5**lv
+        bias = 0.5 * scale - 0.5
+        rows, cols = sizes[lv, 0], sizes[lv, 1]
+        c_lo = max(0, int(math.floor(x_lo * scale + bias)) - 2)
+        c_hi = min(cols - 1, int(math.floor(x_hi * scale + bias)) + 3)
+        r_lo = max(0, int(math.floor(y_lo * scale + bias)) - 2)
+        r_hi = min(rows - 1, int(math.floor(y_hi * scale + bias)) + 3)
+        t = tile[lv]
+        for tr in range(r_lo // t, r_hi // t + 1):
+            for tc in range(c_lo // t, c_hi // t + 1):
+                i = offsets[lv] + tr * grids[lv, 1] + tc
+                if not filled[i] and not need[i]:
+                    need[i] = 1
+                    count += 1
+    return count
+
+
+@njit(cache=True)
+def _propagate(need: np.ndarray, filled: np.ndarray, sizes: np.ndarray, tile: np.ndarray,
+               grids: np.ndarray, offsets: np.ndarray) -> None:
+    """A needed tile of level L needs the unfilled tiles of level L − 1 under it."""
+    for lv in range(sizes.shape[0] - 1, 0, -1):
+        t = tile[lv]
+        tp = tile[lv - 1]
+        for tr in range(grids[lv, 0]):
+            for tc in range(grids[lv, 1]):
+                if not need[offsets[lv] + tr * grids[lv, 1] + tc]:
+                    continue
+                r1 = min((tr + 1) * t, sizes[lv, 0])
+                c1 = min((tc + 1) * t, sizes[lv, 1])
+                for pr in range(2 * tr * t // tp, (2 * r1 - 1) // tp + 1):
+                    for pc in range(2 * tc * t // tp, (2 * c1 - 1) // tp + 1):
+                        i = offsets[lv - 1] + pr * grids[lv - 1, 1] + pc
+                        if not filled[i]:
+                            need[i] = 1
+
+
+@njit(cache=True)
+def _store_level0(atlas: np.ndarray, guard: int, intensity: np.ndarray, wear: np.ndarray,
+                  use_wear: bool, need0: np.ndarray, t: int) -> None:
+    """Copy the needed level-0 tiles of the marking map into the atlas, worn as
+    ``build_scene`` wears them: ``rint(paint × remaining)`` in float32."""
+    rows, cols = intensity.shape
+    for tr in range(need0.shape[0]):
+        for tc in range(need0.shape[1]):
+            if not need0[tr, tc]:
+                continue
+            for r in range(tr * t, min((tr + 1) * t, rows)):
+                for c in range(tc * t, min((tc + 1) * t, cols)):
+                    v = intensity[r, c]
+                    if use_wear:
+                        v = np.uint8(np.rint(np.float32(v) * wear[r, c]))
+                    atlas[guard + r, guard + c] = v
+
+
+@njit(cache=True)
+def _mip_tiles(atlas: np.ndarray, origins: np.ndarray, need: np.ndarray, sizes: np.ndarray,
+               tile: np.ndarray, grids: np.ndarray, offsets: np.ndarray) -> None:
+    """The needed tiles of levels 1… as 2×2 box averages of the level below, rounded
+    like OpenCV's INTER_AREA halving: ``(a + b + c + d + 2) >> 2``."""
+    for lv in range(1, sizes.shape[0]):
+        t = tile[lv]
+        sx, sy = origins[lv - 1, 0], origins[lv - 1, 1]
+        dx, dy = origins[lv, 0], origins[lv, 1]
+        for tr in range(grids[lv, 0]):
+            for tc in range(grids[lv, 1]):
+                if not need[offsets[lv] + tr * grids[lv, 1] + tc]:
+                    continue
+                for r in range(tr * t, min((tr + 1) * t, sizes[lv, 0])):
+                    for c in range(tc * t, min((tc + 1) * t, sizes[lv, 1])):
+                        a = (np.int32(atlas[sy + 2 * r, sx + 2 * c])
+                             + np.int32(atlas[sy + 2 * r, sx + 2 * c + 1])
+                             + np.int32(atlas[sy + 2 * r + 1, sx + 2 * c])
+                             + np.int32(atlas[sy + 2 * r + 1, sx + 2 * c + 1]))
+                        atlas[dy + r, dx + c] = np.uint8((a + 2) >> 2)
+
+
+class MipTiles:
+    """The marking levels of a lazy scene's atlas, filled tile by tile as views need
+    them: a tile of level 0 is painted by the marking map, a tile of level L is the box
+    average of the tiles of level L − 1 under it. Filled tiles hold exactly the eager
+    atlas's texels; the rest of the atlas is still ``np.zeros`` (no memory)."""
+
+    def __init__(self, marking: TiledMarkingMap, atlas: np.ndarray, sizes: list[tuple[int, int]],
+                 origins: list[tuple[int, int]], worn: np.ndarray | None) -> None:
+        self.marking = marking
+        self.atlas = atlas
+        self._worn = worn  # coarse worn share (``_wear_noise``); resized on first use
+        self._remaining: np.ndarray | None = None
+        t0 = marking.tile_px
+        self.sizes = np.array(sizes, np.int64)
+        self.origins = np.array(origins, np.int64)
+        self.tile = np.array([max(1, t0 >> lv) for lv in range(len(sizes))], np.int64)
+        self.grids = -(-self.sizes // self.tile[:, None])
+        counts = self.grids[:, 0] * self.grids[:, 1]
+        self.offsets = np.concatenate(([0], np.cumsum(counts)[:-1])).astype(np.int64)
+        self.filled = np.zeros(int(counts.sum()), np.uint8)
+        self.need = np.zeros_like(self.filled)
+        self.complete = False
+
+    def ensure(self, bounds: np.ndarray, affines: np.ndarray) -> None:
+        """Fill what a view reads (``Scene.prepare``)."""
+        rows, cols = self.marking.shape
+        if _mark_needed(bounds, affines, float(cols), float(rows), self.sizes, self.tile,
+                        self.grids, self.offsets, self.filled, self.need):
+            self._fill()
+
+    def fill_all(self) -> None:
+        self.need[:] = self.filled == 0
+        self._fill()
+
+    def _fill(self) -> None:
+        _propagate(self.need, self.filled, self.sizes, self.tile, self.grids, self.offsets)
+        g0 = self.grids[0]
+        need0 = self.need[:g0[0] * g0[1]].reshape(g0[0], g0[1])
+        self.marking.fill(need0)
+        use_wear = self._worn is not None
+        if use_wear and self._remaining is None:
+            self._remaining = _wear_remaining(self._worn, self.marking.shape)
+        remaining = self._remaining if use_wear else np.ones((1, 1), np.float32)
+        _store_level0(self.atlas, ATLAS_GUARD, self.marking.intensity, remaining, use_wear,
+                      need0, int(self.tile[0]))
+        _mip_tiles(self.atlas, self.origins, self.need, self.sizes, self.tile, self.grids,
+                   self.offsets)
+        self.filled |= self.need
+        self.need[:] = 0
+        self.complete = bool(self.filled.all())
+
+
 def _blobs(rng: np.random.Generator, shape: tuple[int, int], count: int,
            radius_px: tuple[float, float]) -> np.ndarray:
     """Sum of ``count`` soft elliptical blobs (peak 1) at random places."""
@@ -121,10 +326,20 @@ def _blobs(rng: np.random.Generator, shape: tuple[int, int], count: int,
 
 def _wear(rng: np.random.Generator, shape: tuple[int, int], amount: float) -> np.ndarray:
     """Paint remaining [0, 1] per texel: smooth patches where up to ``amount`` is worn."""
+    return _wear_remaining(_wear_noise(rng, shape, amount), shape)
+
+
+def _wear_noise(rng: np.random.Generator, shape: tuple[int, int], amount: float) -> np.ndarray:
+    """``_wear``'s random part: the worn share on a coarse grid (the draws)."""
     coarse = (max(2, shape[0] // 25), max(2, shape[1] // 25))  # ~10 cm patches at 4 mm
     noise = cv2.GaussianBlur(rng.random(coarse).astype(np.float32), (0, 0), 1.5)
     noise = (noise - noise.min()) / max(1e-6, float(noise.max() - noise.min()))
-    worn = amount * np.clip(2.0 * noise - 0.5, 0.0, 1.0)
+    return amount * np.clip(2.0 * noise - 0.5, 0.0, 1.0)
+
+
+def _wear_remaining(worn: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """``_wear``'s per-texel part: the coarse worn share resized to the map, subtracted
+    from 1 (float32)."""
     return 1.0 - cv2.resize(worn, (shape[1], shape[0]), interpolation=cv2.INTER_LINEAR)
 
 
@@ -155,24 +370,81 @@ def _wall_texture(rng: np.random.Generator, hall: Hall) -> np.ndarray:
     return np.clip(tex, 0, 255).astype(np.uint8)
 
 
+WALL_CACHE_SIZE: int = 4
+"""Wall textures kept for reuse (keyed by the hall and the generator's state)."""
+
+_wall_cache: dict[tuple, tuple[np.ndarray, dict]] = {}
+_last_marking: list[TiledMarkingMap] = []  # the last track's map: one entry at most
+
+
+def _cached_wall_texture(rng: np.random.Generator, hall: Hall) -> np.ndarray:
+    """``_wall_texture``, reused when the same hall is drawn from the same generator
+    state (every scene without randomisation: ``default_rng(0)``); the generator ends in
+    the state the drawing leaves it in, so later draws do not change."""
+    state = rng.bit_generator.state
+    if state.get("bit_generator") != "PCG64":
+        return _wall_texture(rng, hall)
+    key = (hall, state["state"]["state"], state["state"]["inc"], state["has_uint32"],
+           state["uinteger"])
+    hit = _wall_cache.get(key)
+    if hit is None:
+        tex = _wall_texture(rng, hall)
+        tex.flags.writeable = False  # shared by scenes
+        if len(_wall_cache) >= WALL_CACHE_SIZE:
+            _wall_cache.pop(next(iter(_wall_cache)))
+        hit = _wall_cache[key] = (tex, rng.bit_generator.state)
+    else:
+        rng.bit_generator.state = hit[1]
+    return hit[0]
+
+
+def _marking_for(track: Track) -> TiledMarkingMap:
+    """The lazily painted marking map of ``track``, shared with the last scene built on
+    an equal track (a new appearance on the same track repaints nothing)."""
+    if _last_marking and (_last_marking[0].track is track or _last_marking[0].track == track):
+        return _last_marking[0]
+    marking = TiledMarkingMap(track)
+    _last_marking[:] = [marking]
+    return marking
+
+
 def build_scene(track: Track, effects: Effects | None = None,
                 rng: np.random.Generator | None = None, hall: Hall | None = None,
-                marking_map: MarkingMap | None = None) -> Scene:
+                marking_map: MarkingMap | None = None, *, lazy: bool = True) -> Scene:
     """Prepare ``track`` for rendering; random layout (shadows, glare, wear, walls) from
-    ``rng``. Pass a cached ``marking_map`` to skip rasterising the track again."""
+    ``rng``. Pass a cached ``marking_map`` to skip rasterising the track again.
+
+    ``lazy`` (without a ``marking_map``): the markings are painted tile by tile as the
+    renderer looks at them (``Scene.prepare``), so a scene costs little until it is seen;
+    the frames are those of the eager scene (``lazy=False``) bit for bit."""
     fx = effects or Effects()
     rng = rng if rng is not None else np.random.default_rng(0)
     hall = hall or Hall()
-    m = marking_map if marking_map is not None else rasterize(track)
-    level0 = m.intensity
-    if fx.wear > 0:
-        level0 = np.rint(level0 * _wear(rng, level0.shape, fx.wear)).astype(np.uint8)
-    wall = _wall_texture(rng, hall)
-    atlas, origins, wall_origin = _atlas(level0, wall)
+    tiles = None
+    if lazy and marking_map is None:
+        marking = _marking_for(track)
+        shape, resolution_m, origin_m = marking.shape, marking.resolution_m, marking.origin_m
+        worn = _wear_noise(rng, shape, fx.wear) if fx.wear > 0 else None
+        wall = _cached_wall_texture(rng, hall)
+        (height, width), sizes, level_xy, wall_origin = _atlas_layout(shape, wall.shape)
+        atlas = np.zeros((height, width), np.uint8)  # calloc: unfilled tiles cost nothing
+        wx, wy = wall_origin
+        atlas[wy:wy + wall.shape[0], wx:wx + wall.shape[1]] = wall
+        atlas[wy:wy + wall.shape[0], wx + wall.shape[1]] = wall[:, 0]  # wraps (see _atlas)
+        origins = np.array(level_xy, np.float32)
+        tiles = MipTiles(marking, atlas, sizes, level_xy, worn)
+    else:
+        m = marking_map if marking_map is not None else rasterize(track)
+        shape, resolution_m, origin_m = m.shape, m.resolution_m, m.origin_m
+        level0 = m.intensity
+        if fx.wear > 0:
+            level0 = np.rint(level0 * _wear(rng, level0.shape, fx.wear)).astype(np.uint8)
+        wall = _cached_wall_texture(rng, hall)
+        atlas, origins, wall_origin = _atlas(level0, wall)
     light = None
     if fx.shadows > 0 or fx.glare_spots > 0:
-        rows = max(1, int(math.ceil(level0.shape[0] * m.resolution_m / LIGHT_RES_M)))
-        cols = max(1, int(math.ceil(level0.shape[1] * m.resolution_m / LIGHT_RES_M)))
+        rows = max(1, int(math.ceil(shape[0] * resolution_m / LIGHT_RES_M)))
+        cols = max(1, int(math.ceil(shape[1] * resolution_m / LIGHT_RES_M)))
         light = np.zeros((rows, cols, 2), np.uint8)
         shadow = 1.0 - fx.shadow_depth * _blobs(rng, (rows, cols), fx.shadows, (6.0, 25.0))
         glare = fx.glare_spot_dn * _blobs(rng, (rows, cols), fx.glare_spots, (3.0, 10.0))
@@ -184,7 +456,7 @@ def build_scene(track: Track, effects: Effects | None = None,
         boxes[k, 4:, 2] = ob.height_m
     return Scene(
         track=track, effects=fx, hall=hall, atlas=atlas, level_origin=origins,
-        level0_size=(level0.shape[1], level0.shape[0]), resolution_m=m.resolution_m,
-        origin=m.origin_m, light=light, wall_origin=wall_origin,
-        wall_size=(wall.shape[1], wall.shape[0]), boxes=boxes,
+        level0_size=(shape[1], shape[0]), resolution_m=resolution_m,
+        origin=origin_m, light=light, wall_origin=wall_origin,
+        wall_size=(wall.shape[1], wall.shape[0]), boxes=boxes, tiles=tiles,
     )
