@@ -184,6 +184,30 @@ class Tally:
                      self.ego_visible + other.ego_visible, self.ego_found + other.ego_found,
                      self.times + other.times)
 
+    def to_json(self) -> dict[str, Any]:
+        """The sums as JSON values (``from_json`` reads them back exactly)."""
+        return {"frames": self.frames, "confidence_sum": self.confidence_sum,
+                "frames_without_line": self.frames_without_line, "lines": self.lines,
+                "false_positives": self.false_positives,
+                "ego_visible": [int(v) for v in self.ego_visible],
+                "ego_found": [int(v) for v in self.ego_found],
+                "times": sorted([int(b), int(c)] for b, c in self.times.counts.items())}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> Tally:
+        """A tally from ``to_json``'s values (KeyError, TypeError or ValueError if they
+        are not)."""
+        times = TimeHistogram()
+        for b, c in data["times"]:
+            times.counts[int(b)] = int(c)
+        out = cls(int(data["frames"]), float(data["confidence_sum"]),
+                  int(data["frames_without_line"]), int(data["lines"]),
+                  int(data["false_positives"]), np.array(data["ego_visible"], np.int64),
+                  np.array(data["ego_found"], np.int64), times)
+        if out.ego_visible.shape != (2,) or out.ego_found.shape != (2,):
+            raise ValueError("ego_visible and ego_found hold two counts each")
+        return out
+
     def summary(self) -> dict[str, Any]:
         """The figures (rates in [0, 1], times in ms)."""
         n = max(self.frames, 1)
@@ -260,6 +284,39 @@ def _one(job: tuple[str, int | None, int | None, str]) -> tuple[str, dict[str, T
         scenario = generated_scenario(seed, max_frames=max_frames)
         group = "generated"
     return group, compare_scenario(scenario, renderer=renderer)
+
+
+CompareJob = tuple[str, int | None, int | None, str]
+"""(thesis scenario or "random", seed, max frames, camera): one scenario of the comparison."""
+
+
+def run_job(job: CompareJob) -> tuple[str, dict[str, Tally]]:
+    """One scenario: the picklable top-level function every backend runs."""
+    return _one(job)
+
+
+def job_name(job: CompareJob) -> str:
+    """The scenario's name in compare.jsonl: the thesis scenario or ``seed N``."""
+    return job[0] if job[1] is None else f"seed {job[1]}"
+
+
+def run_record(job: CompareJob, result: tuple[str, Mapping[str, Tally]]) -> dict[str, Any]:
+    """A scenario's JSON record (a line of ``--results``): its figures and its tallies."""
+    group, tallies = result
+    return {"scenario": job_name(job), "group": group,
+            "detectors": {k: t.summary() for k, t in tallies.items()},
+            "tallies": {k: t.to_json() for k, t in tallies.items()}}
+
+
+def check_run_record(job: CompareJob, rec: dict[str, Any]) -> None:
+    """A stored record is ``job``'s scenario and its tallies read back, else an error."""
+    if rec.get("scenario") != job_name(job):
+        raise ValueError(f"it holds scenario {rec.get('scenario')!r}, the sweep's next one is "
+                         f"{job_name(job)!r}")
+    if not isinstance(rec.get("group"), str) or not isinstance(rec.get("tallies"), dict):
+        raise ValueError("it lacks the scenario's group or tallies")
+    for tally in rec["tallies"].values():
+        Tally.from_json(tally)
 
 
 def compare_jobs(thesis: Sequence[str], seeds: Iterable[int], max_frames: int | None,

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import itertools
 import json
 import sys
 from collections.abc import Mapping
@@ -20,17 +19,21 @@ from ..cli_common import (
     DIRECTORY,
     CliError,
     SweepEnd,
+    SweepSpec,
     add_force_option,
     add_json_option,
-    add_workers_option,
+    add_sweep_options,
     bounded_float_arg,
     bounded_int_arg,
     check_outputs,
-    consume,
+    check_sweep_options,
+    read_results,
+    resume_hint,
+    run_sweep,
     seed_range_arg,
     speed_arg_for,
+    sweep_backend,
     sweep_exit,
-    workers_arg_value,
 )
 from ..interrupts import ignoring_stops
 from ..perception import DetectorConfig, LaneObservation
@@ -51,7 +54,8 @@ from .trajectory import FRAME_RATE_HZ
 PRESETS = {"thesis": DetectorConfig.thesis, "improved": DetectorConfig.improved}
 """The "with LIS" configurations ``--preset`` selects."""
 
-_SUFFIXES = {"plot": ".png", "xml": ".xml", "jsonl": ".jsonl", "video": ".mp4"}
+_SUFFIXES = {"plot": ".png", "xml": ".xml", "jsonl": ".jsonl", "video": ".mp4",
+             "results": ".jsonl"}
 
 
 def register(sub: Any) -> None:
@@ -113,7 +117,7 @@ def _evaluate_parser(sub: Any) -> None:
                     help=f"use every N-th camera frame ({FRAME_RATE_HZ:g}/s), 1–{MAX_STRIDE}")
     ev.add_argument("--max-frames", type=bounded_int_arg(1, MAX_FRAMES),
                     help="random: cut each lap after this many frames")
-    add_workers_option(ev)
+    add_sweep_options(ev, "tracks")
     ev.add_argument("--plot", type=Path, help="PNG chart (per frame; random: per track)")
     ev.add_argument("--xml", type=Path, help="lanes per frame, thesis listing 4.1 (one track)")
     ev.add_argument("--jsonl", type=Path, help="every frame of every run as JSON Lines")
@@ -135,7 +139,8 @@ def _configs(args: argparse.Namespace) -> dict[str, DetectorConfig]:
     return {WITH_LIS: preset, WITHOUT_LIS: DetectorConfig.without_lis()}
 
 
-_SCENARIO_ONLY = ("seeds", "max_frames", "workers", "plot", "xml", "jsonl", "video")
+_SCENARIO_ONLY = ("seeds", "max_frames", "workers", "plot", "xml", "jsonl", "video",
+                  "ray_address", "results", "resume")
 _FRAMES_ONLY = ("labels", "detector", "repeat", "stills")
 
 
@@ -149,6 +154,8 @@ def _check_frames(args: argparse.Namespace) -> None:
         if getattr(args, opt) not in (None, False):
             args.parser.error(f"--{opt.replace('_', '-')} applies to a --scenario, not to "
                               "--frames")
+    if args.backend != "local":
+        args.parser.error("--backend applies to --scenario random, not to --frames")
     if args.speed != THESIS_SPEED_M_S or args.stride != 1:
         args.parser.error("--speed and --stride apply to a --scenario, not to --frames")
     if args.detector == "hough" and (args.preset is not None or args.no_lis):
@@ -157,6 +164,7 @@ def _check_frames(args: argparse.Namespace) -> None:
 
 
 def _check(args: argparse.Namespace) -> None:
+    check_sweep_options(args)
     if args.frames is None:
         if args.scenario is None:
             args.parser.error("give --scenario (a rendered drive) or --frames DIR --labels "
@@ -173,7 +181,8 @@ def _check(args: argparse.Namespace) -> None:
         args.parser.error("--scenario random needs --seeds A:B (e.g. --seeds 0:50)")
     if not random:
         for opt, value in (("--seeds", args.seeds), ("--max-frames", args.max_frames),
-                           ("--workers", args.workers)):
+                           ("--workers", args.workers), ("--results", args.results),
+                           ("--backend ray", "ray" if args.backend == "ray" else None)):
             if value is not None:
                 args.parser.error(f"{opt} only applies to --scenario random")
         try:  # the thesis' strips are laid out for its speed: check the drive fits
@@ -187,8 +196,23 @@ def _check(args: argparse.Namespace) -> None:
             if getattr(args, opt) is not None:
                 raise CliError(f"--{opt} writes one track's run; give a single seed "
                                f"(--seeds {args.seeds.start}:{args.seeds.start + 1})")
-    check_outputs({k: getattr(args, k) for k in _SUFFIXES}, _SUFFIXES, args.force,
-                  inputs={"camera": camera_input(args.camera)})
+    if random and _is_sweep(args):
+        for opt in ("xml", "video"):
+            if getattr(args, opt) is not None:
+                args.parser.error(f"--{opt} records one track's run in this process; not "
+                                  "with --results or --backend ray")
+    if args.resume and args.jsonl is not None:
+        args.parser.error("--jsonl writes every frame of every track; a resumed sweep has "
+                          "only the finished tracks' results, not their frames: drop --jsonl "
+                          "or start afresh without --resume")
+    # --resume replaces the report of the run it continues (and its --results file).
+    check_outputs({k: getattr(args, k) for k in _SUFFIXES}, _SUFFIXES,
+                  args.force or args.resume, inputs={"camera": camera_input(args.camera)})
+
+
+def _is_sweep(args: argparse.Namespace) -> bool:
+    """A random scenario streamed as a sweep (one seed too with --results or Ray)."""
+    return (len(args.seeds) > 1 or args.results is not None or args.backend == "ray")
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
@@ -205,7 +229,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
                            "epsilon_px": args.epsilon_px, "speed_m_s": args.speed,
                            "stride": args.stride, "runs": list(configs)}
     with Outputs() as outs:
-        if kind is ScenarioKind.RANDOM and len(args.seeds) > 1:
+        if kind is ScenarioKind.RANDOM and _is_sweep(args):
             end = _evaluate_seeds(args, configs, out, outs, progress)
         else:
             end = _evaluate_one(args, configs, kind, out, outs, progress)
@@ -220,8 +244,9 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         _print_table(out)
     what = (f"kept the {out['tracks_done']} of {len(args.seeds)} tracks that had finished"
             if "tracks_done" in out else f"kept the {out['frames_done']} frames evaluated so far")
-    files = [out[k] for k in ("plot", "xml", "jsonl", "video") if k in out]
-    return sweep_exit(end, what + (f" ({', '.join(files)})" if files else ""))
+    files = [out[k] for k in ("plot", "xml", "jsonl", "video", "results") if k in out]
+    return sweep_exit(end, what + (f" ({', '.join(files)})" if files else "")
+                      + resume_hint(args))
 
 
 def _evaluate_frames(args: argparse.Namespace) -> int:
@@ -273,40 +298,53 @@ def _evaluate_frames(args: argparse.Namespace) -> int:
 
 def _evaluate_seeds(args: argparse.Namespace, configs: Mapping[str, DetectorConfig],
                     out: dict[str, Any], outs: Any, progress: bool) -> SweepEnd:
-    """A range of generated tracks, streamed: each finished track goes to --jsonl and to
-    the pooled tallies, then is dropped. Returns how the stream ended."""
-    from tqdm import tqdm
-
+    """A range of generated tracks, streamed: each finished track goes to --results, to
+    --jsonl (its frames) and to the pooled tallies, then is dropped. Returns how the
+    stream ended."""
     from .export import frame_records
-    from .sweep import PooledTally, iter_seeds
+    from .sweep import PooledTally, check_seed_record, seed_job, seed_record
 
-    workers = workers_arg_value(args.workers, len(args.seeds))
+    spec = SweepSpec(command="evaluate",
+                     config={"scenario": args.scenario,
+                             "seeds": f"{args.seeds.start}:{args.seeds.stop}",
+                             "preset": args.preset, "no_lis": args.no_lis,
+                             "ablation": args.ablation, "epsilon_px": args.epsilon_px,
+                             "speed": args.speed, "stride": args.stride,
+                             "max_frames": args.max_frames, "camera": args.camera},
+                     jobs=(int(s) for s in args.seeds), total=len(args.seeds),
+                     fn=seed_job(configs, epsilon_px=args.epsilon_px, camera=args.camera,
+                                 speed_m_s=args.speed, stride=args.stride,
+                                 max_frames=args.max_frames),
+                     record=seed_record, check=check_seed_record)
+    resume = read_results(args.results, spec) if args.resume else None
+    backend = sweep_backend(args, len(args.seeds))
     tallies = {label: PooledTally() for label in configs}
     per_seed: list[dict[str, Any]] = []
     lines = 0
     with contextlib.ExitStack() as stack:
         fh = (stack.enter_context(open(outs.path(args.jsonl), "w", encoding="utf-8"))
               if args.jsonl is not None else None)
-        bar = stack.enter_context(tqdm(total=len(args.seeds), desc="tracks", unit="track",
-                                       disable=not progress))
-        results = iter_seeds(args.seeds, configs, workers=workers, epsilon_px=args.epsilon_px,
-                             camera=args.camera, speed_m_s=args.speed, stride=args.stride,
-                             max_frames=args.max_frames)
 
-        def keep(runs: Mapping[str, Any]) -> None:
+        def keep(rec: Mapping[str, Any]) -> None:
+            if set(rec["runs"]) != set(tallies):
+                raise ValueError(f"runs {sorted(rec['runs'])}, expected {sorted(tallies)}")
+            for label, run in rec["runs"].items():
+                tallies[label].add_counts(run["counts"])
+                per_seed.append(run["summary"])
+
+        def frames(seed: int, runs: Mapping[str, Any]) -> None:
             nonlocal lines
-            for label, run in runs.items():
-                tallies[label].add(run)
-                per_seed.append(run.summary())
-                if fh is not None:
-                    for rec in frame_records(run):
-                        fh.write(json.dumps(rec, allow_nan=False) + "\n")
-                        lines += 1
-            if fh is not None:
-                fh.flush()  # a finished track is on disk at once
-            bar.update()
+            if fh is None:
+                return
+            for run in runs.values():
+                for r in frame_records(run):
+                    fh.write(json.dumps(r, allow_nan=False) + "\n")
+                    lines += 1
+            fh.flush()  # a finished track is on disk at once
 
-        end = consume(results, keep)
+        end = run_sweep(spec, backend, keep, resume=resume, progress=progress,
+                        results=None if args.results is None else outs.path(args.results),
+                        desc="tracks", unit="track", on_result=frames)
     out["seeds"] = [args.seeds.start, args.seeds.stop]
     out["tracks_done"] = len(per_seed) // len(configs)
     out["interrupted"] = end.early
@@ -316,6 +354,8 @@ def _evaluate_seeds(args: argparse.Namespace, configs: Mapping[str, DetectorConf
     with ignoring_stops():  # a second Ctrl-C must not lose the first one's results
         out["pooled"] = {label: t.summary() for label, t in tallies.items()}
         _write_seed_outputs(args, configs, out, outs, per_seed, lines)
+        if args.results is not None:
+            out["results"] = str(args.results)
     return end
 
 
@@ -441,7 +481,7 @@ def _print_table(out: dict[str, Any]) -> None:
               f"{s['min_confidence']:6.3f} {s['frames_below_0_75']:6d} {s['roi_resets']:6d} "
               f"{acc if acc is not None else float('nan'):6.3f} "
               f"{s['false_positive_rate']:6.3f} {s['false_negative_rate']:6.3f}")
-    for key in ("plot", "xml", "jsonl", "video"):
+    for key in ("plot", "xml", "jsonl", "video", "results"):
         if key in out:
             print(f"wrote {out[key]}")
 
@@ -484,7 +524,7 @@ def _compare_parser(sub: Any) -> None:
                            help="thesis scenarios only")
     cp.add_argument("--max-frames", type=bounded_int_arg(1, MAX_FRAMES),
                     help="cut each generated lap after this many frames")
-    add_workers_option(cp)
+    add_sweep_options(cp, "scenarios")
     cp.add_argument("--out", type=Path,
                     help="write compare.jsonl, compare.json, compare.md and compare.png into "
                          "this folder")
@@ -495,24 +535,41 @@ def _compare_parser(sub: Any) -> None:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
     from ..outputs import Outputs
-    from .baseline import CompareTally, iter_compare, markdown_table, plot
+    from .baseline import (
+        CompareTally,
+        Tally,
+        check_run_record,
+        compare_jobs,
+        markdown_table,
+        plot,
+        run_job,
+        run_record,
+    )
 
+    check_sweep_options(args)
     thesis = () if args.no_thesis else args.thesis
     seeds = range(0) if args.no_generated else args.seeds
     if not thesis and not len(seeds):
         args.parser.error("--no-thesis and --no-generated leave nothing to compare")
     if args.max_frames is not None and args.no_generated:
         args.parser.error("--max-frames cuts generated laps; --no-generated runs none")
-    if args.out is not None:  # checked before minutes of work, not after
-        check_outputs({"out": args.out}, {"out": DIRECTORY}, args.force,
-                      files_in={"out": COMPARE_FILES.values()},
-                      inputs={"camera": camera_input(args.camera)})
+    # Checked before minutes of work, not after; --resume replaces the report of the run
+    # it continues (and its --results file).
+    check_outputs({"out": args.out, "results": args.results},
+                  {"out": DIRECTORY, "results": ".jsonl"}, args.force or args.resume,
+                  files_in={"out": COMPARE_FILES.values()},
+                  inputs={"camera": camera_input(args.camera)})
     check_camera_geometry(args.camera)
     jobs = len(thesis) + len(seeds)
-    workers = workers_arg_value(args.workers, jobs)
+    spec = SweepSpec(command="compare",
+                     config={"thesis": list(thesis),
+                             "seeds": f"{seeds.start}:{seeds.stop}" if len(seeds) else None,
+                             "max_frames": args.max_frames, "camera": args.camera},
+                     jobs=compare_jobs(thesis, seeds, args.max_frames, args.camera),
+                     total=jobs, fn=run_job, record=run_record, check=check_run_record)
+    resume = read_results(args.results, spec) if args.resume else None
+    backend = sweep_backend(args, jobs)
     progress = sys.stderr.isatty() or not args.json
     tally = CompareTally()
     with Outputs() as outs, contextlib.ExitStack() as stack:
@@ -520,23 +577,17 @@ def cmd_compare(args: argparse.Namespace) -> int:
                  if args.out is not None else None)
         fh = (stack.enter_context(open(files["jsonl"], "w", encoding="utf-8"))
               if files is not None else None)
-        bar = stack.enter_context(tqdm(total=jobs, desc="scenarios", unit="scenario",
-                                       disable=not progress))
-        results = iter_compare(thesis, seeds, max_frames=args.max_frames, workers=workers,
-                               camera=args.camera)
-        job_names = itertools.chain(thesis, (f"seed {s}" for s in seeds))  # lazily
 
-        def keep(job: tuple[str, Mapping[str, Any]]) -> None:
-            group, tallies = job
-            tally.add(group, tallies)
+        def keep(rec: dict[str, Any]) -> None:
+            tally.add(rec["group"], {k: Tally.from_json(t) for k, t in rec["tallies"].items()})
             if fh is not None:
-                fh.write(json.dumps({"scenario": next(job_names), "group": group,
-                                     "detectors": {k: t.summary()
-                                                   for k, t in tallies.items()}}) + "\n")
+                fh.write(json.dumps({k: rec[k] for k in ("scenario", "group", "detectors")})
+                         + "\n")
                 fh.flush()  # a finished scenario is on disk at once
-            bar.update()
 
-        end = consume(results, keep)
+        end = run_sweep(spec, backend, keep, resume=resume, progress=progress,
+                        results=None if args.results is None else outs.path(args.results),
+                        desc="scenarios", unit="scenario")
         stack.close()
         if not tally.jobs:
             outs.abort()
@@ -550,13 +601,17 @@ def cmd_compare(args: argparse.Namespace) -> int:
                 files["md"].write_text(table, encoding="utf-8")
                 plot(result, files["png"])
                 result["out"] = {k: str(args.out / f) for k, f in COMPARE_FILES.items()}
+            if args.results is not None:
+                result["results"] = str(args.results)
             outs.commit()
     if args.json:
         print(json.dumps(result))
     else:
         print(table, end="")
-        if args.out is not None:
-            print(f"wrote {', '.join(result['out'].values())}")
+        written = [*(result["out"].values() if args.out is not None else ()),
+                   *([str(args.results)] if args.results is not None else ())]
+        if written:
+            print(f"wrote {', '.join(written)}")
     where = f" in {args.out}/ ({', '.join(COMPARE_FILES.values())})" if args.out else ""
     return sweep_exit(end, f"kept the {tally.jobs} of {jobs} scenarios that had finished"
-                           + where)
+                           + where + resume_hint(args))

@@ -4,7 +4,7 @@ and the ablation of the LIS stages."""
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import replace
 from functools import partial
 from typing import Any
@@ -68,8 +68,7 @@ def iter_seeds(seeds: Iterable[int], configs: Mapping[str, DetectorConfig], *,
     order and do not depend on the number of workers."""
     if workers < 1:
         raise ValueError(f"workers must be ≥ 1, got {workers}")
-    job = partial(_one_seed, configs=dict(configs), epsilon_px=epsilon_px,
-                  scenario_kwargs=scenario_kwargs, camera=camera)
+    job = seed_job(configs, epsilon_px=epsilon_px, camera=camera, **scenario_kwargs)
     yield from stream(job, (int(s) for s in seeds), workers=workers)
 
 
@@ -101,23 +100,25 @@ class PooledTally:
         self.given = self.n_truth = self.fp = self.fn = 0
 
     def add(self, run: RunResult) -> None:
-        conf = run.confidence
+        self.add_counts(run_counts(run))
+
+    def add_counts(self, c: Mapping[str, Any]) -> None:
+        """Add one track's ``run_counts`` (read back from a results file: the same sums)."""
         self.tracks += 1
-        self.frames += len(conf)
-        self.conf_sum += float(conf.sum())
-        self.min_conf = min(self.min_conf, float(conf.min()))
-        self.worst_track_mean = min(self.worst_track_mean, float(conf.mean()))
-        self.below += int((conf < LOW_CONFIDENCE).sum())
-        resets = int(run.roi_reset.sum())
+        self.frames += int(c["frames"])
+        self.conf_sum += float(c["conf_sum"])
+        self.min_conf = min(self.min_conf, float(c["min_conf"]))
+        self.worst_track_mean = min(self.worst_track_mean, float(c["mean_conf"]))
+        self.below += int(c["below"])
+        resets = int(c["roi_resets"])
         self.roi_resets += resets
         self.tracks_with_reset += resets > 0
-        acc = run.accuracy[run.truth_present]
-        self.acc_sum += float(acc.sum())
-        self.acc_n += len(acc)
-        self.given += int(np.all(np.isfinite(run.lanes), axis=2).sum())
-        self.n_truth += int(run.truth_present.sum())
-        self.fp += int(run.false_positive.sum())
-        self.fn += int(run.false_negative.sum())
+        self.acc_sum += float(c["acc_sum"])
+        self.acc_n += int(c["acc_n"])
+        self.given += int(c["given"])
+        self.n_truth += int(c["n_truth"])
+        self.fp += int(c["fp"])
+        self.fn += int(c["fn"])
 
     def summary(self) -> dict[str, Any]:
         if not self.frames:
@@ -135,6 +136,46 @@ class PooledTally:
             "false_positive_rate": self.fp / max(1, self.given),
             "false_negative_rate": self.fn / max(1, self.n_truth),
         }
+
+
+def run_counts(run: RunResult) -> dict[str, Any]:
+    """What ``PooledTally`` needs of one track's run, as JSON values."""
+    conf = run.confidence
+    acc = run.accuracy[run.truth_present]
+    return {"frames": len(conf), "conf_sum": float(conf.sum()), "min_conf": float(conf.min()),
+            "mean_conf": float(conf.mean()), "below": int((conf < LOW_CONFIDENCE).sum()),
+            "roi_resets": int(run.roi_reset.sum()), "acc_sum": float(acc.sum()),
+            "acc_n": len(acc), "given": int(np.all(np.isfinite(run.lanes), axis=2).sum()),
+            "n_truth": int(run.truth_present.sum()), "fp": int(run.false_positive.sum()),
+            "fn": int(run.false_negative.sum())}
+
+
+def seed_job(configs: Mapping[str, DetectorConfig], *, epsilon_px: float = EPSILON_PX,
+             camera: str = "thesis", **scenario_kwargs: Any
+             ) -> Callable[[int], dict[str, RunResult]]:
+    """The per-seed job of ``iter_seeds``: picklable (a partial of a top-level function),
+    so every backend runs the same one."""
+    return partial(_one_seed, configs=dict(configs), epsilon_px=epsilon_px,
+                   scenario_kwargs=scenario_kwargs, camera=camera)
+
+
+def seed_record(seed: int, runs: Mapping[str, RunResult]) -> dict[str, Any]:
+    """A track's JSON record (a line of ``--results``): per run its summary and counts."""
+    return {"seed": seed, "runs": {label: {"summary": run.summary(), "counts": run_counts(run)}
+                                   for label, run in runs.items()}}
+
+
+def check_seed_record(seed: int, rec: dict[str, Any]) -> None:
+    """A stored record is ``seed``'s track, else ValueError."""
+    if rec.get("seed") != seed:
+        raise ValueError(f"it holds seed {rec.get('seed')!r}, the sweep's next one is {seed}")
+    runs = rec.get("runs")
+    if not isinstance(runs, dict) or not runs:
+        raise ValueError("it lacks the track's runs")
+    for run in runs.values():
+        if not isinstance(run, dict) or not {"summary", "counts"} <= set(run):
+            raise ValueError("a run lacks its summary or counts")
+        PooledTally().add_counts(run["counts"])  # raises on missing or bad counts
 
 
 def pooled_summary(runs: Iterable[RunResult]) -> dict[str, Any]:
