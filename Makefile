@@ -12,7 +12,7 @@ $(BIN)/.installed: pyproject.toml
 	# torch first, pinned to the local CPU wheel, so that stable-baselines3 (the rl extra)
 	# never makes pip fetch another torch with gigabytes of CUDA.
 	$(BIN)/python -m pip install --quiet torch==2.13.0
-	$(BIN)/python -m pip install --quiet -e '.[dev,rl]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,rl,ray]'
 	# numba's on-disk cache pickles the module name of each kernel: entries compiled before
 	# a package moved (tracks -> tfalda_sim.tracks) would name a module that is gone.
 	find tfalda_sim tracks envs agents -name '*.nb[ic]' -delete
