@@ -300,8 +300,8 @@ def add_sweep_options(parser: argparse.ArgumentParser, what: str = "jobs") -> No
 
 
 def check_sweep_options(args: argparse.Namespace) -> None:
-    """Contradictory sweep options refused at the parser (usage and exit 2); a
-    ``--resume`` whose ``--results`` file is missing refused with ``CliError``."""
+    """Contradictory sweep options refused at the parser (usage and exit 2); a missing
+    ``--results`` file of a ``--resume`` is ``read_results``' to refuse."""
     error = args.sweep_parser.error
     if args.ray_address is not None and args.backend != "ray":
         error("--ray-address names a Ray cluster: it needs --backend ray")
@@ -310,9 +310,6 @@ def check_sweep_options(args: argparse.Namespace) -> None:
     if args.resume and getattr(args, "force", False):
         error("--resume continues --results and replaces the report it had; --force starts "
               "afresh over it: give one of them")
-    if args.resume and not args.results.is_file():
-        raise CliError(f"--resume: {args.results} is not a file (nothing to resume); run "
-                       "without --resume to start the sweep")
 
 
 def sweep_backend(args: argparse.Namespace, jobs: int) -> Backend[Any, Any]:
@@ -368,6 +365,9 @@ def read_results(path: Path, spec: SweepSpec[Any]) -> Iterator[tuple[int, dict[s
     against ``spec`` now (``CliError`` naming the mismatch). An incomplete last line (a
     write cut off) is dropped with a note: its job runs again; any other bad line is an
     error naming it."""
+    if not path.is_file():
+        raise CliError(f"--resume: {path} is not a file (nothing to resume); run without "
+                       "--resume to start the sweep")
     try:
         fh = open(path, "rb")  # closed by the generator below (or on an error here)
     except OSError as exc:
