@@ -133,30 +133,70 @@ MAX_N_ENVS: int = 64
 """Most training envs: each SubprocVecEnv worker holds a renderer and a scene (hundreds
 of MB); more than this is a typo, not a training set-up."""
 
+MAX_ENV_RUNNERS: int = 4096
+"""Most RLlib env runners (a cluster's CPUs): more is a typo."""
+
+TRAIN_BACKENDS: tuple[str, ...] = ("sb3", "rllib")
+"""What ``train`` trains with: stable-baselines3 (local) or RLlib (Ray, local or cluster)."""
+
+BACKEND_OPTIONS: dict[str, tuple[str, ...]] = {"sb3": ("n_envs",),
+                                               "rllib": ("env_runners", "train_batch",
+                                                         "ray_address")}
+"""The ``train`` options only one backend understands (refused with the other)."""
+
 
 def _train_parser(sub: Any) -> None:
-    tr = sub.add_parser("train", help="train a PPO steering policy (needs the rl extra)",
-                        description="PPO (stable-baselines3) on vectorised TfaldaTrack-v0 envs "
-                                    "over the training track seeds; TensorBoard logs, "
-                                    "checkpoints, the policy and train.json in --out. Ctrl-C "
+    tr = sub.add_parser("train", help="train a PPO steering policy (stable-baselines3 or RLlib)",
+                        description="PPO on TfaldaTrack-v0's lane observations over the training "
+                                    "track seeds. --backend sb3 (default, the rl extra): "
+                                    "stable-baselines3 on --n-envs local processes; TensorBoard "
+                                    "logs, checkpoints, policy.zip and train.json in --out. "
+                                    "--backend rllib (the rllib extra): RLlib on a local Ray or "
+                                    "the Ray cluster at --ray-address, --env-runners sampling "
+                                    "actors; the RLlib checkpoint/ and train.json (every "
+                                    "iteration's steps/s and mean return) in --out. Ctrl-C "
                                     "stops the training and keeps the policy so far.")
-    tr.add_argument("--timesteps", type=bounded_int_arg(1, 10**12), default=1_000_000)
-    tr.add_argument("--n-envs", type=bounded_int_arg(1, MAX_N_ENVS), default=2,
-                    help=f"envs stepped in parallel, one process each (1–{MAX_N_ENVS})")
+    tr.add_argument("--backend", choices=TRAIN_BACKENDS, default="sb3",
+                    help="stable-baselines3 on this machine (default) or RLlib on Ray")
+    tr.add_argument("--timesteps", type=bounded_int_arg(1, 10**12), default=1_000_000,
+                    help="env steps to train for (rllib: whole iterations of --train-batch)")
+    tr.add_argument("--n-envs", type=bounded_int_arg(1, MAX_N_ENVS),
+                    help=f"sb3: envs stepped in parallel, one process each (1–{MAX_N_ENVS}, "
+                         "default 2)")
+    tr.add_argument("--env-runners", type=bounded_int_arg(0, MAX_ENV_RUNNERS),
+                    help=f"rllib: Ray actors sampling the env, one CPU each (0–"
+                         f"{MAX_ENV_RUNNERS}, default 2; 0: sample in this process)")
+    tr.add_argument("--train-batch", type=bounded_int_arg(1, 10**9),
+                    help="rllib: env steps collected per training iteration (default 2048)")
+    tr.add_argument("--ray-address", metavar="ADDR",
+                    help="rllib: a running Ray cluster, 'auto' or HOST:PORT (default: start a "
+                         "local Ray with --env-runners CPUs for this run)")
     tr.add_argument("--seed", type=seed_arg, default=0)
     tr.add_argument("--speed", type=speed_arg, default=1.5, help=SPEED_HELP)
-    tr.add_argument("--out", type=Path, default=Path("runs/ppo"),
-                    help="folder for policy.zip, train.json, tb/ and checkpoints/")
+    tr.add_argument("--out", type=Path,
+                    help="folder for the run (default runs/ppo with sb3, runs/rllib with rllib)")
     tr.add_argument("--force", action="store_true",
-                    help="write into a folder that holds an earlier run: its policy.zip, "
-                         "train.json and same-named checkpoints are replaced, its TensorBoard "
-                         "runs kept beside the new one")
+                    help="write into a folder that holds an earlier run: its policy.zip or "
+                         "checkpoint/, train.json and same-named checkpoints are replaced, its "
+                         "TensorBoard runs kept beside the new one")
     add_camera_option(tr)
     add_json_option(tr)
-    tr.set_defaults(func=cmd_train)
+    tr.set_defaults(func=cmd_train, train_parser=tr)
+
+
+def _check_backend_options(args: argparse.Namespace) -> None:
+    """An option of the other backend is refused (usage and exit 2), never ignored."""
+    for backend, dests in BACKEND_OPTIONS.items():
+        given = [f"--{d.replace('_', '-')}" for d in dests if getattr(args, d) is not None]
+        if backend != args.backend and given:
+            args.train_parser.error(f"{' and '.join(given)} {'is' if len(given) == 1 else 'are'}"
+                                    f" for --backend {backend}, not {args.backend}")
 
 
 def cmd_train(args: argparse.Namespace) -> int:
+    _check_backend_options(args)
+    if args.backend == "rllib":
+        return _cmd_train_rllib(args)
     try:
         import stable_baselines3  # noqa: F401
     except ImportError:
@@ -166,6 +206,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     from .train import OUT_FILES, train
 
+    args.out = Path("runs/ppo") if args.out is None else args.out
+    args.n_envs = 2 if args.n_envs is None else args.n_envs
     check_outputs({"out": args.out}, {"out": DIRECTORY}, args.force,
                   files_in={"out": OUT_FILES}, inputs={"camera": camera_input(args.camera)})
     check_camera_geometry(args.camera)
@@ -184,6 +226,54 @@ def cmd_train(args: argparse.Namespace) -> int:
         return interrupted(f"stopped after {summary['timesteps_done']} of {args.timesteps} "
                            f"steps; kept the policy so far ({args.out / 'policy.zip'}), "
                            f"train.json, the checkpoints and the TensorBoard logs")
+    return 0
+
+
+def _cmd_train_rllib(args: argparse.Namespace) -> int:
+    import sys
+
+    from tfalda_sim.parallel import WORKER_MEMORY_BYTES, available_memory_bytes
+
+    from . import rllib
+    from . import train as sb3
+
+    try:
+        rllib.import_rllib()
+    except rllib.RllibUnavailable as exc:
+        raise CliError(str(exc)) from None
+    out = Path("runs/rllib") if args.out is None else args.out
+    runners = 2 if args.env_runners is None else args.env_runners
+    # Both backends' files: an earlier run of either is not mixed into without --force.
+    check_outputs({"out": out}, {"out": DIRECTORY}, args.force,
+                  files_in={"out": tuple(dict.fromkeys((*rllib.OUT_FILES, *sb3.OUT_FILES)))},
+                  inputs={"camera": camera_input(args.camera)})
+    check_camera_geometry(args.camera)
+    mem = available_memory_bytes()
+    if args.ray_address is None and mem is not None and runners * WORKER_MEMORY_BYTES > mem:
+        raise CliError(f"--env-runners {runners} needs about "
+                       f"{runners * WORKER_MEMORY_BYTES / 2**30:.1f} GiB, "
+                       f"{mem / 2**30:.1f} GiB is available; use at most "
+                       f"{max(1, mem // WORKER_MEMORY_BYTES)}")
+    config = rllib.RllibConfig(env_runners=runners, **(
+        {} if args.train_batch is None else {"train_batch": args.train_batch}))
+    try:
+        summary = rllib.train_rllib(args.timesteps, args.seed, out, config=config,
+                                    speed_m_s=args.speed, camera=args.camera,
+                                    address=args.ray_address, progress=not args.json)
+    except rllib.RllibUnavailable as exc:
+        raise CliError(str(exc)) from None
+    checkpoint = out / "checkpoint"
+    print(json.dumps(summary) if args.json else
+          f"trained {summary['timesteps_done']} steps in {summary['iterations_done']} "
+          f"iterations, {summary['train_time_s']:.0f} s → {checkpoint}")
+    kept = (f"kept the checkpoint of iteration {summary['iterations_done']} of "
+            f"{summary['iterations']} ({checkpoint}) and train.json")
+    if summary["failed"]:
+        print(f"error: the training failed: {summary['failed']}; {kept}", file=sys.stderr)
+        return 1
+    if summary["interrupted"]:
+        return interrupted(f"stopped after {summary['timesteps_done']} of {args.timesteps} "
+                           f"steps; {kept}")
     return 0
 
 
