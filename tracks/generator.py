@@ -333,7 +333,8 @@ def generate(seed: int, params: GeneratorParams | None = None) -> Track:
         if rules.validate(track):
             continue
         track = _add_elements(track, rng, p)
-        if not rules.validate(track):
+        # Same road as just validated: only the new elements need checking.
+        if not rules.validate_elements(track):
             return track
     raise RuntimeError(f"no valid track for seed {seed} after {p.max_attempts} attempts; "
                        "widen GeneratorParams.extent_m or radius_m")

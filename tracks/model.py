@@ -33,6 +33,11 @@ MAX_LANE_WIDTH_M: float = 1.0
 spatial index registers every centre-line sample in a square of cells whose area grows
 with the square of the road's width, so an absurd width would allocate without bound."""
 
+INDEX_CACHE_SIZE: int = 8
+"""Spatial indexes kept per road geometry (an index is a few hundred kB at most)."""
+
+_INDEX_CACHE: dict[tuple, GridIndex] = {}
+
 
 class Line(Enum):
     """The three longitudinal lines of a road, seen in the driving direction."""
@@ -336,8 +341,16 @@ class Track:
     # ----------------------------------------------------------- reverse query
     @cached_property
     def index(self) -> GridIndex:
-        """Spatial hash of the segments for O(1) reverse queries (built on first use)."""
-        return build_index(self.table, self.half_road_m)
+        """Spatial hash of the segments for O(1) reverse queries (built on first use, and
+        shared by tracks with the same road: a copy with other cartons or gaps)."""
+        key = (self.segments, self.start, self.lane_width_m)
+        index = _INDEX_CACHE.get(key)
+        if index is None:
+            index = build_index(self.table, self.half_road_m)
+            if len(_INDEX_CACHE) >= INDEX_CACHE_SIZE:
+                _INDEX_CACHE.pop(next(iter(_INDEX_CACHE)))
+            _INDEX_CACHE[key] = index
+        return index
 
     def locate(self, x_m: float, y_m: float, s_hint_m: float | None = None) -> Location:
         """Reverse query: world point → arc length, lateral offset, lane.

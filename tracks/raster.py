@@ -269,12 +269,27 @@ def _raster_kernel(
             r_hi = min(n_rows - 1, int(math.ceil((oy - min(ya, yb, ym) + bow) / res)))
             if not _any_tile(todo, tile, r_lo, r_hi, c_lo, c_hi):
                 continue
+            if arc:
+                # The chunk's sector of the annulus |d| <= pad, as two half-planes through
+                # the centre (when the sector is convex), loosened by ARC_CLIP_SLACK_PX.
+                slack = ARC_CLIP_SLACK_PX * res
+                wedge = (ub - ua) / radius < 0.9 * math.pi
+                phi_a = phi0 + sign * ua / radius
+                phi_b = phi0 + sign * ub / radius
+                ax_, ay_ = math.cos(phi_a), math.sin(phi_a)
+                bx_, by_ = math.cos(phi_b), math.sin(phi_b)
             for r in range(r_lo, r_hi + 1):
                 tile_row = todo[r // tile]
                 py = oy - (r + 0.5) * res
                 q_lo = c_lo
                 q_hi = c_hi
-                if not arc:
+                q_lo2 = 0
+                q_hi2 = -1
+                if arc:
+                    q_lo, q_hi, q_lo2, q_hi2 = _arc_row_spans(
+                        py - cy, cx, ox, res, radius - pad - slack, radius + pad + slack, wedge,
+                        ax_, ay_, bx_, by_, sign, slack, c_lo, c_hi)
+                else:
                     # u and d are linear in x along a row: clip the row to the chunk's band.
                     dy = py - y0[j]
                     bands = ((ch, dy * sh, ua, ub), (-sh, dy * ch, -pad, pad))
@@ -288,43 +303,100 @@ def _raster_kernel(
                         xb_ = x0[j] + (hi_v - base) / coef
                         q_lo = max(q_lo, int(math.floor((min(xa_, xb_) - ox) / res - 0.5)))
                         q_hi = min(q_hi, int(math.ceil((max(xa_, xb_) - ox) / res - 0.5)))
-                q_run = q_lo
-                while q_run <= q_hi:  # the row's runs through one tile each
-                    tc = q_run // tile
-                    q_end = min(q_hi, (tc + 1) * tile - 1)
-                    first = q_run
-                    q_run = q_end + 1
-                    if not tile_row[tc]:
-                        continue
-                    for q in range(first, q_end + 1):
-                        px = ox + (q + 0.5) * res
-                        if arc:
-                            vx = px - cx
-                            vy = py - cy
-                            d = sign * (radius - math.hypot(vx, vy))
-                            if abs(d) > pad or not (has_special
-                                                    or _near_line(d, lane_w, line_reach)):
-                                continue
-                            u = ((sign * (math.atan2(vy, vx) - phi0)) % (2.0 * math.pi)) * radius
-                        else:
-                            dx = px - x0[j]
-                            dy = py - y0[j]
-                            d = -dx * sh + dy * ch
-                            if abs(d) > pad or not (has_special
-                                                    or _near_line(d, lane_w, line_reach)):
-                                continue
-                            u = dx * ch + dy * sh
-                        if u < ua or u > ub or (u == ub and not last):
+                for span in range(2):  # arcs: the annulus may cut the row in two
+                    q_run = q_lo if span == 0 else q_lo2
+                    span_hi = q_hi if span == 0 else q_hi2
+                    while q_run <= span_hi:  # the span's runs through one tile each
+                        tc = q_run // tile
+                        q_end = min(span_hi, (tc + 1) * tile - 1)
+                        first = q_run
+                        q_run = q_end + 1
+                        if not tile_row[tc]:
                             continue
-                        s = s0[j] + u
-                        if closed and s >= total:
-                            s -= total
-                        _paint_pixel(intensity, labels, r, q, s, d, res, total, closed, lane_w,
-                                     line_w, dash, period, gap_line, gap_lo, gap_hi, passes,
-                                     start_s, start_w, stop_w)
+                        for q in range(first, q_end + 1):
+                            px = ox + (q + 0.5) * res
+                            if arc:
+                                vx = px - cx
+                                vy = py - cy
+                                d = sign * (radius - math.hypot(vx, vy))
+                                if abs(d) > pad or not (has_special
+                                                        or _near_line(d, lane_w, line_reach)):
+                                    continue
+                                u = ((sign * (math.atan2(vy, vx) - phi0)) % (2.0 * math.pi)
+                                     ) * radius
+                            else:
+                                dx = px - x0[j]
+                                dy = py - y0[j]
+                                d = -dx * sh + dy * ch
+                                if abs(d) > pad or not (has_special
+                                                        or _near_line(d, lane_w, line_reach)):
+                                    continue
+                                u = dx * ch + dy * sh
+                            if u < ua or u > ub or (u == ub and not last):
+                                continue
+                            s = s0[j] + u
+                            if closed and s >= total:
+                                s -= total
+                            _paint_pixel(intensity, labels, r, q, s, d, res, total, closed, lane_w,
+                                         line_w, dash, period, gap_line, gap_lo, gap_hi, passes,
+                                         start_s, start_w, stop_w)
 
 
 _LINE_INDEX = {"right": 0, "centre": 1, "left": 2}
+
+
+ARC_CLIP_SLACK_PX: float = 2.0
+"""How far [px] the row spans of an arc chunk reach beyond its exact sector of the road:
+the spans only skip pixels the exact per-pixel test would reject, rounding included."""
+
+
+@njit(cache=True)
+def _clip_half_plane(lo: float, hi: float, coef: float, rhs: float, cx: float,
+                     reach: float) -> tuple[float, float]:
+    """``[lo, hi]`` (x [m]) cut to ``coef · (x − cx) >= rhs``, for ``|x − cx| <= reach``."""
+    if abs(coef) < 1e-12:
+        if rhs > abs(coef) * reach:
+            return 1.0, 0.0  # empty
+        return lo, hi
+    if coef > 0.0:
+        return max(lo, cx + rhs / coef), hi
+    return lo, min(hi, cx + rhs / coef)
+
+
+@njit(cache=True)
+def _arc_row_spans(vy: float, cx: float, ox: float, res: float, r_in: float, r_out: float,
+                   wedge: bool, ax: float, ay: float, bx: float, by: float, sign: float,
+                   slack: float, c_lo: int, c_hi: int) -> tuple[int, int, int, int]:
+    """The one or two column spans of a map row (``vy`` [m] above the arc's centre) that
+    can hold pixels of an arc chunk: inside the annulus ``r_in … r_out`` [m] around the
+    centre and, with ``wedge``, between the rays to the chunk's ends ``(ax, ay)`` and
+    ``(bx, by)`` (each loosened by ``slack`` [m]). Empty spans have lo > hi."""
+    if vy * vy > r_out * r_out:
+        return 0, -1, 0, -1
+    w_out = math.sqrt(r_out * r_out - vy * vy)
+    lo = cx - w_out
+    hi = cx + w_out
+    if wedge:  # sign · cross(a, v) >= −slack and sign · cross(v, b) >= −slack
+        lo, hi = _clip_half_plane(lo, hi, -sign * ay, -slack - sign * ax * vy, cx, r_out)
+        lo, hi = _clip_half_plane(lo, hi, sign * by, -slack + sign * bx * vy, cx, r_out)
+    if lo > hi:
+        return 0, -1, 0, -1
+    lo2 = 1.0
+    hi2 = 0.0
+    if r_in > 0.0 and vy * vy < r_in * r_in:
+        w_in = math.sqrt(r_in * r_in - vy * vy)
+        lo2 = max(lo, cx + w_in)
+        hi2 = hi
+        hi = min(hi, cx - w_in)
+    q1 = (0, -1)
+    q2 = (0, -1)
+    if lo <= hi:
+        q1 = (max(c_lo, int(math.floor((lo - ox) / res - 0.5))),
+              min(c_hi, int(math.ceil((hi - ox) / res - 0.5))))
+    if lo2 <= hi2:
+        q2 = (max(c_lo, int(math.floor((lo2 - ox) / res - 0.5))),
+              min(c_hi, int(math.ceil((hi2 - ox) / res - 0.5))))
+    return q1[0], q1[1], q2[0], q2[1]
 
 
 @njit(cache=True)

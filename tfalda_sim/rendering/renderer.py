@@ -358,6 +358,7 @@ class _Layout:
     cuts: np.ndarray  # per row: columns where reads_atlas switches, padded with the width
     level: np.ndarray  # uint8: ground pixels' mip level
     levels: int  # mip levels of the atlas
+    pixel_key: tuple  # key of its ``_PixelLayout``: what window packings depend on
 
 
 @dataclass(frozen=True)
@@ -376,6 +377,24 @@ class _PixelLayout:
     reads_atlas: np.ndarray
     cuts: np.ndarray
     level: np.ndarray
+
+
+@njit(cache=True)
+def _place_walls(coord_b: np.ndarray, index: np.ndarray, wall_row: np.ndarray,
+                 wall_y: float) -> None:
+    """The wall pixels' atlas rows: texture row + the wall's atlas row, summed in float64
+    and rounded to float32 once (as the layout always did)."""
+    for k in range(len(index)):
+        coord_b[index[k]] = np.float32(wall_row[k] + wall_y)
+
+
+@njit(cache=True)
+def _lookup(bias_x: np.ndarray, bias_y: np.ndarray, code: np.ndarray, table: np.ndarray
+            ) -> None:
+    """Per pixel the atlas offsets of its code (mip level, wall or ceiling)."""
+    for k in range(len(code)):
+        bias_x[k] = table[0, code[k]]
+        bias_y[k] = table[1, code[k]]
 
 
 def _switch_columns(mask: np.ndarray) -> np.ndarray:
@@ -436,7 +455,7 @@ class Renderer:
     def _layout(self, scene: Scene) -> _Layout:
         return self._scene_data(scene)[0]
 
-    def _pixel_layout(self, scene: Scene) -> _PixelLayout:
+    def _pixel_layout(self, scene: Scene) -> tuple[_PixelLayout, tuple]:
         key = (scene.resolution_m, scene.levels, scene.hall, scene.wall_size[1])
         base = self._pixel_layouts.get(key)
         if base is None:
@@ -444,7 +463,7 @@ class Renderer:
             if len(self._pixel_layouts) >= 4:
                 self._pixel_layouts.pop(next(iter(self._pixel_layouts)))
             self._pixel_layouts[key] = base
-        return base
+        return base, key
 
     def _build_pixel_layout(self, scene: Scene) -> _PixelLayout:
         g = self.geometry
@@ -480,7 +499,7 @@ class Renderer:
     def _build_layout(self, scene: Scene) -> _Layout:
         """The scene's layout: the cached pixel layout plus where this atlas puts its
         levels and walls (the same float64 sums as ever, rounded to float32 once)."""
-        base = self._pixel_layout(scene)
+        base, pixel_key = self._pixel_layout(scene)
         levels = scene.levels
         origin = scene.level_origin
         bias = np.zeros((2, levels + 2))
@@ -492,13 +511,15 @@ class Renderer:
         bias[0, levels + 1] = _PAD
         bias32 = bias.astype(np.float32)
         coord_b = base.coord_b.copy()
-        coord_b.reshape(-1)[base.wall_index] = (
-            base.wall_row + scene.wall_origin[1]).astype(np.float32)
+        _place_walls(coord_b.reshape(-1), base.wall_index, base.wall_row,
+                     float(scene.wall_origin[1]))
+        bias_x = np.empty_like(base.coord_a)
+        bias_y = np.empty_like(base.coord_a)
+        _lookup(bias_x.reshape(-1), bias_y.reshape(-1), base.code.reshape(-1), bias32)
         return _Layout(
-            coord_a=base.coord_a, coord_b=coord_b, scale=base.scale,
-            bias_x=bias32[0][base.code], bias_y=bias32[1][base.code],
-            flags=base.flags, reads_atlas=base.reads_atlas, cuts=base.cuts,
-            level=base.level, levels=levels,
+            coord_a=base.coord_a, coord_b=coord_b, scale=base.scale, bias_x=bias_x,
+            bias_y=bias_y, flags=base.flags, reads_atlas=base.reads_atlas, cuts=base.cuts,
+            level=base.level, levels=levels, pixel_key=pixel_key,
         )
 
     def _buffers(self, st: _Stack, with_light: bool
@@ -577,9 +598,9 @@ class Renderer:
         if not boxes:
             return []
         fx = scene.effects
-        layout, box_faces, layout_key = self._scene_data(scene)
+        layout, box_faces, _ = self._scene_data(scene)
         gain, sheen, params = self._maps_for(fx)
-        st = self._stack(boxes, layout, layout_key)
+        st = self._stack(boxes, layout)
         blur_m = speed_m_s * fx.motion_blur_s
         shifts = np.linspace(0.0, blur_m, MOTION_BLUR_SAMPLES) if blur_m > 0 else (0.0,)
         blur = len(shifts) > 1
@@ -655,9 +676,10 @@ class Renderer:
             boxes.append((wx0, wy0, ww, wh))
         return tuple(boxes)
 
-    def _stack(self, boxes: tuple, layout: _Layout, layout_key: tuple) -> _Stack:
-        """How the windows' pixels are packed (cached per window list and layout)."""
-        key = (boxes, layout_key)
+    def _stack(self, boxes: tuple, layout: _Layout) -> _Stack:
+        """How the windows' pixels are packed (cached per window list and pixel layout:
+        the same for every track)."""
+        key = (boxes, layout.pixel_key)
         cached = self._stacks.get(key)
         if cached is not None:
             return cached
