@@ -436,6 +436,14 @@ VALID: dict[str, list[str]] = {
 }
 """Valid-looking values by option dest."""
 
+VALID.update({"results": ["new.jsonl", "frames.jsonl", "sub/new.jsonl", "file.json"],
+              "ray_address": ["127.0.0.1:1", "auto"]})
+
+NOT_FUZZED = {"ray"}
+"""Choices the fuzz never passes: ``--backend ray`` starts a Ray (seconds, beyond the
+examples' budget; tests/tfalda_sim/test_ray_backend.py tests it). ``--ray-address`` is
+still fuzzed: without ``--backend ray`` the parser refuses it."""
+
 FOR_COMMAND: dict[tuple[str, ...], dict[str, list[str]]] = {
     ("track", "generate"): {"out": ["new.json", "sub/new.json", "track.json"],
                             "png": ["new.png", "pic.png", "sub/new.png", "link.png"]},
@@ -476,7 +484,7 @@ UNKNOWN = ["--bogus", "--bogus=1", "-z", "--", "extra", "--help", "-h", "--json=
 def _valid_values(command: tuple[str, ...], action: argparse.Action) -> list[str]:
     """What a user would plausibly pass to ``action``: its choices, the tables above; for
     an option the tables do not know, the path pool (Path) or the hostile pool."""
-    valid = [str(c) for c in action.choices or ()]
+    valid = [str(c) for c in action.choices or () if str(c) not in NOT_FUZZED]
     valid += FOR_COMMAND.get(command, {}).get(action.dest, VALID.get(action.dest, []))
     if not valid:
         valid = PATHS if action.type is Path else HOSTILE

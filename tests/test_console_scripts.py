@@ -18,6 +18,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import time
 import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -419,3 +420,50 @@ def test_train_with_progress_bar(tmp_path: Path) -> None:
     assert "trained" in run.out and "policy.zip" in run.out, str(run)
     assert "100%" in run.err, str(run)  # the bar reached its end
     _assert_trained(tmp_path / "out" / "tr")
+
+
+# --------------------------------------------------------------------------- sweeps on Ray
+def _without_timings(obj: Any) -> Any:
+    """``obj`` without wall-clock figures (they differ between any two runs)."""
+    if isinstance(obj, dict):
+        return {k: _without_timings(v) for k, v in obj.items()
+                if k not in ("detector_ms_median", "results")}
+    if isinstance(obj, list):
+        return [_without_timings(v) for v in obj]
+    return obj
+
+
+def test_a_sweep_on_ray_stopped_by_ctrl_c_resumes_to_the_uninterrupted_result(
+        tmp_path: Path) -> None:
+    """`evaluate` on a local Ray, SIGINT once some tracks are in --results: exit 130, the
+    finished tracks kept; --resume (on the local pool) finishes the rest without redoing
+    them, and results and report equal an uninterrupted run's."""
+    if SCRIPT is None:
+        pytest.fail("no tfalda-sim console script")
+    sweep = ("evaluate", "--scenario", "random", "--seeds", "0:8", "--max-frames", "25",
+             "--json")
+    proc = subprocess.Popen([SCRIPT, *sweep, "--backend", "ray", "--workers", "2",
+                             "--results", "r.jsonl"], cwd=tmp_path, env=_child_env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_default_sigint)
+    deadline = time.monotonic() + TIMEOUT_S
+    while time.monotonic() < deadline and proc.poll() is None:
+        staged = list(tmp_path.glob(".tfalda-sim-*.tmp.jsonl"))
+        if staged and len(staged[0].read_text().splitlines()) >= 3:  # header + 2 tracks
+            break
+        time.sleep(0.1)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=TIMEOUT_S)
+    assert proc.returncode == 130 and "Traceback" not in err, err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("interrupted (Ctrl-C): kept the") and "--resume" in last, last
+    kept = (tmp_path / "r.jsonl").read_text().splitlines()
+    assert 3 <= len(kept) < 9, "the sweep was not interrupted midway"
+    resumed = tfalda(*sweep, "--workers", "2", "--results", "r.jsonl", "--resume",
+                     cwd=tmp_path).json()
+    assert (tmp_path / "r.jsonl").read_text().splitlines()[:len(kept)] == kept
+    whole = tfalda(*sweep, "--workers", "2", "--results", "whole.jsonl", cwd=tmp_path).json()
+    assert _without_timings(resumed) == _without_timings(whole)
+    assert ([_without_timings(json.loads(x)) for x in (tmp_path / "r.jsonl").read_text()
+             .splitlines()] == [_without_timings(json.loads(x)) for x in
+                                (tmp_path / "whole.jsonl").read_text().splitlines()])

@@ -93,7 +93,7 @@ def test_stress_keeps_an_earlier_report_without_force(tmp_path: Path,
                                                       ) -> None:
     """The issue's reproduction: stress overwrote stress.md/.json/.png in --out."""
     (tmp_path / "stress.md").write_text("earlier")
-    _forbid(monkeypatch, "tfalda_sim.agents.stress.iter_battery")
+    _forbid(monkeypatch, "tfalda_sim.agents.stress.run_job")
     code, _, err = run(capsys, "stress", "--seeds", "10003:10004", "--out", str(tmp_path))
     assert code == 2 and "stress.md exists; add --force" in err
     assert (tmp_path / "stress.md").read_text() == "earlier"

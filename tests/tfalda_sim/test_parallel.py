@@ -112,12 +112,11 @@ def test_stress_says_when_it_caps_the_workers(monkeypatch: pytest.MonkeyPatch, t
 
     seen = {}
 
-    def fake_battery(seeds: range, faults: list[str], *, workers: int,
-                     camera: str = "thesis") -> Iterator[object]:
+    def fake_stream(fn: object, jobs: object, *, workers: int) -> Iterator[object]:
         seen["workers"] = workers
         return iter(())
 
-    monkeypatch.setattr("tfalda_sim.agents.stress.iter_battery", fake_battery)
+    monkeypatch.setattr("tfalda_sim.parallel.stream", fake_stream)  # what Backend runs
     code = main(["stress", "--seeds", "10000:10001", "--faults", "none", "--workers",
                  "100000", "--out", str(tmp_path / "s")])
     err = capsys.readouterr().err
