@@ -24,6 +24,7 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -211,6 +212,10 @@ def _start_ray(ray: Any, workers: int | None, address: str | None) -> bool:
         return False
     kwargs: dict[str, Any] = {"include_dashboard": False, "logging_level": logging.ERROR,
                               "log_to_driver": False}
+    # ray.init installs its own SIGTERM handler; ours (tfalda_sim.interrupts) must stay, so
+    # that SIGTERM keeps the finished results as Ctrl-C does.
+    main = threading.current_thread() is threading.main_thread()
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGHUP)} if main else {}
     try:
         if address is None:
             ray.init(num_cpus=workers, **kwargs)
@@ -220,6 +225,10 @@ def _start_ray(ray: Any, workers: int | None, address: str | None) -> bool:
         where = f"the Ray cluster at {address}" if address else "a local Ray"
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise RayUnavailable(f"could not start {where}: {first}") from None
+    finally:
+        for sig, handler in saved.items():
+            if handler is not None:
+                signal.signal(sig, handler)
     return True
 
 
