@@ -21,6 +21,7 @@ import math
 import os
 import platform
 import shutil
+import signal
 import sys
 import tempfile
 import threading
@@ -33,7 +34,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from tfalda_sim.interrupts import INTERRUPTS, ignoring_stops, is_interrupt
+from tfalda_sim.interrupts import INTERRUPTS, STOP_SIGNALS, ignoring_stops, is_interrupt
 
 from .train import TRAIN_SEEDS, TRAIN_SPEED_M_S, PpoConfig, env_kwargs
 
@@ -180,6 +181,24 @@ def _wait_for(event: threading.Event) -> None:
         pass
 
 
+@contextlib.contextmanager
+def _keeping_stop_handlers() -> Iterator[None]:
+    """Put the stop signals' handlers back after the block: connecting to Ray installs
+    its C++ crash handler for SIGTERM (which aborts the process, leaving Ray's processes
+    behind) and, in the main thread, a Python SIGTERM handler of its own; the CLI's
+    clean stop (``tfalda_sim.interrupts``) must stay. A no-op outside the main thread."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    saved = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, handler in saved.items():
+            if handler is not None:  # None: not set from Python, nothing to put back
+                signal.signal(sig, handler)
+
+
 def _ray_error(address: str | None, exc: BaseException) -> RllibUnavailable:
     where = f"the Ray cluster at {address}" if address else "a local Ray"
     first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
@@ -208,7 +227,8 @@ def ray_session(address: str | None, num_cpus: int) -> Iterator[None]:
                               "log_to_driver": False}
     if address is not None:
         try:
-            ray.init(address=address, **kwargs)
+            with _keeping_stop_handlers():
+                ray.init(address=address, **kwargs)
         except (ConnectionError, RuntimeError, ValueError, TimeoutError) as exc:
             with contextlib.suppress(Exception):
                 ray.shutdown()
@@ -241,14 +261,16 @@ def ray_session(address: str | None, num_cpus: int) -> Iterator[None]:
     level = worker_log.level
     worker_log.setLevel(logging.ERROR)
     thread = threading.Thread(target=hold, name="ray-session", daemon=True)
-    thread.start()
     try:
         try:
-            _wait_for(ready)
-        except BaseException:
-            with ignoring_stops():
-                _wait_for(ready)
-            raise
+            with _keeping_stop_handlers():
+                thread.start()
+                try:
+                    _wait_for(ready)
+                except BaseException:
+                    with ignoring_stops():
+                        _wait_for(ready)
+                    raise
         finally:
             worker_log.setLevel(level)
         if failure:
@@ -261,7 +283,8 @@ def ray_session(address: str | None, num_cpus: int) -> Iterator[None]:
         with ignoring_stops():
             ray.shutdown()
             release.set()
-            thread.join()
+            if thread.ident is not None:  # started
+                thread.join()
 
 
 def _save_checkpoint(algo: Any, staging: Path) -> None:
