@@ -14,6 +14,7 @@ break a rule (roads too close) are redrawn from the same generator.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, fields, replace
 
@@ -308,12 +309,25 @@ def _add_elements(track: Track, rng: np.random.Generator, p: GeneratorParams) ->
                    obstacles=tuple(sorted(obstacles, key=lambda o: o.s_m)))
 
 
+GENERATE_CACHE_SIZE: int = 16
+"""Generated tracks kept (a track is immutable: asking for a seed again, as an env on a
+fixed generated track does at every reset, returns the same object)."""
+
+
 def generate(seed: int, params: GeneratorParams | None = None) -> Track:
     """A valid closed Carolo-Cup circuit for scenario ``seed`` (deterministic)."""
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     p = params or GeneratorParams()
-    rng = np.random.default_rng(int(seed))
+    try:
+        hash(p)
+    except TypeError:  # parameters holding lists: nothing to key a cache on
+        return _generate(int(seed), p)
+    return _generate_cached(int(seed), p)
+
+
+def _generate(seed: int, p: GeneratorParams) -> Track:
+    rng = np.random.default_rng(seed)
     r_min = rules.min_centre_radius_m(p.lane_width_m)
     eight = rng.random() < p.figure_eight_probability
     mirror = rng.random() < p.clockwise_probability
@@ -338,3 +352,6 @@ def generate(seed: int, params: GeneratorParams | None = None) -> Track:
             return track
     raise RuntimeError(f"no valid track for seed {seed} after {p.max_attempts} attempts; "
                        "widen GeneratorParams.extent_m or radius_m")
+
+
+_generate_cached = functools.lru_cache(maxsize=GENERATE_CACHE_SIZE)(_generate)

@@ -44,41 +44,74 @@ class GridIndex:
     items: np.ndarray
 
 
+@njit(cache=True)
+def _centre_samples(x0: np.ndarray, y0: np.ndarray, h0: np.ndarray, kappa: np.ndarray,
+                    length: np.ndarray, step: float
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centre-line points every ``step`` [m] or less along each segment, both ends
+    included, and their segment: ``np.linspace(0, length, n)`` spelled out (``i · step``,
+    the last one the length), so the points are those numpy's would give."""
+    total = 0
+    for j in range(len(length)):
+        total += max(2, math.ceil(length[j] / step) + 1)
+    xs = np.empty(total)
+    ys = np.empty(total)
+    segs = np.empty(total, np.int64)
+    k = 0
+    for j in range(len(length)):
+        n = max(2, math.ceil(length[j] / step) + 1)
+        du = length[j] / (n - 1)
+        for i in range(n):
+            u = length[j] if i == n - 1 else i * du + 0.0
+            xs[k], ys[k], _ = pose_at(x0[j], y0[j], h0[j], kappa[j], u)
+            segs[k] = j
+            k += 1
+    return xs, ys, segs
+
+
+@njit(cache=True)
+def _cell_pairs(xs: np.ndarray, ys: np.ndarray, segs: np.ndarray, gx0: float, gy0: float,
+                cell_m: float, nx: int, ny: int, span: int, reach: float, n_seg: int
+                ) -> np.ndarray:
+    """Sorted unique ``cell · (n_seg + 1) + segment`` codes of every (sample, cell) pair
+    whose cell square lies within ``reach`` of the sample."""
+    side = 2 * span + 1
+    codes = np.empty(len(xs) * side * side, np.int64)
+    n = 0
+    for k in range(len(xs)):
+        sx = xs[k]
+        sy = ys[k]
+        ci = np.int64(math.floor((sx - gx0) / cell_m))
+        cj = np.int64(math.floor((sy - gy0) / cell_m))
+        for oi in range(-span, span + 1):
+            ii = ci + oi
+            cx_lo = gx0 + ii * cell_m
+            dx = max(0.0, max(cx_lo - sx, sx - cx_lo - cell_m))
+            for oj in range(-span, span + 1):
+                jj = cj + oj
+                cy_lo = gy0 + jj * cell_m
+                dy = max(0.0, max(cy_lo - sy, sy - cy_lo - cell_m))
+                if dx * dx + dy * dy <= reach * reach and 0 <= ii < nx and 0 <= jj < ny:
+                    codes[n] = (jj * nx + ii) * (n_seg + 1) + segs[k]
+                    n += 1
+    return np.unique(codes[:n])
+
+
 def build_index(table: SegmentTable, half_road_m: float, cell_m: float = CELL_M) -> GridIndex:
     """Register each segment in every cell within ``half_road_m + EXTRA_REACH_M`` of it."""
     reach = half_road_m + EXTRA_REACH_M + _SAMPLE_STEP_M
-    xs, ys, segs = [], [], []
-    for j in range(len(table.length)):
-        n = max(2, math.ceil(table.length[j] / _SAMPLE_STEP_M) + 1)
-        for u in np.linspace(0.0, table.length[j], n):
-            x, y, _ = pose_at(table.x0[j], table.y0[j], table.h0[j], table.kappa[j], u)
-            xs.append(x)
-            ys.append(y)
-            segs.append(j)
-    xs_a, ys_a, seg_a = np.array(xs), np.array(ys), np.array(segs, dtype=np.int64)
+    xs_a, ys_a, seg_a = _centre_samples(table.x0, table.y0, table.h0, table.kappa,
+                                        table.length, _SAMPLE_STEP_M)
     gx0 = xs_a.min() - reach - cell_m
     gy0 = ys_a.min() - reach - cell_m
     nx = int(math.ceil((xs_a.max() + reach + cell_m - gx0) / cell_m)) + 1
     ny = int(math.ceil((ys_a.max() + reach + cell_m - gy0) / cell_m)) + 1
     span = int(math.ceil(reach / cell_m)) + 1
-    offsets = np.arange(-span, span + 1)
-    ci = np.floor((xs_a - gx0) / cell_m).astype(np.int64)
-    cj = np.floor((ys_a - gy0) / cell_m).astype(np.int64)
-    # Every (sample, neighbour cell) pair whose cell square lies within reach of the sample.
-    ii = (ci[:, None, None] + offsets[None, :, None]).repeat(len(offsets), axis=2)
-    jj = (cj[:, None, None] + offsets[None, None, :]).repeat(len(offsets), axis=1)
-    cx_lo = gx0 + ii * cell_m
-    cy_lo = gy0 + jj * cell_m
-    sx = xs_a[:, None, None]
-    sy = ys_a[:, None, None]
-    dx = np.maximum(0.0, np.maximum(cx_lo - sx, sx - cx_lo - cell_m))
-    dy = np.maximum(0.0, np.maximum(cy_lo - sy, sy - cy_lo - cell_m))
-    near = (dx * dx + dy * dy <= reach * reach) & (ii >= 0) & (ii < nx) & (jj >= 0) & (jj < ny)
-    cells = (jj * nx + ii)[near]
-    seg_ids = np.broadcast_to(seg_a[:, None, None], near.shape)[near]
-    pairs = np.unique(cells * (len(table.length) + 1) + seg_ids)
-    cell_of = pairs // (len(table.length) + 1)
-    items = (pairs % (len(table.length) + 1)).astype(np.int64)
+    n_seg = len(table.length)
+    pairs = _cell_pairs(xs_a, ys_a, seg_a, float(gx0), float(gy0), float(cell_m), nx, ny,
+                        span, float(reach), n_seg)
+    cell_of = pairs // (n_seg + 1)
+    items = (pairs % (n_seg + 1)).astype(np.int64)
     counts = np.bincount(cell_of, minlength=nx * ny)
     cell_start = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
     return GridIndex(float(gx0), float(gy0), float(cell_m), nx, ny, cell_start, items)

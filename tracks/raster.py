@@ -16,6 +16,7 @@ integers, ready for ``cv2.remap``.
 from __future__ import annotations
 
 import math
+import mmap
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import TYPE_CHECKING
@@ -409,8 +410,16 @@ def _any_tile(todo: np.ndarray, tile: int, r_lo: int, r_hi: int, c_lo: int, c_hi
     return False
 
 
-TILE_PX: int = 64
-"""Edge of a tile of a ``TiledMarkingMap`` [px] (25.6 cm at 4 mm/px): the unit painted on
+def untouched_zeros(shape: tuple[int, ...]) -> np.ndarray:
+    """A uint8 array of zeros whose pages cost nothing until written: anonymous memory
+    straight from the kernel. (``np.zeros`` is calloc, and once large blocks have been
+    freed, glibc serves the next ones from its heap and clears them in full.)"""
+    size = max(1, math.prod(shape))
+    return np.frombuffer(mmap.mmap(-1, size), np.uint8, math.prod(shape)).reshape(shape)
+
+
+TILE_PX: int = 32
+"""Edge of a tile of a ``TiledMarkingMap`` [px] (12.8 cm at 4 mm/px): the unit painted on
 demand."""
 
 
@@ -418,7 +427,7 @@ class TiledMarkingMap:
     """A marking map painted tile by tile on demand (``fill``): a camera sees a few metres
     of a track, so painting only what it looks at makes a new track cheap to show.
 
-    ``intensity`` and ``labels`` are full-size arrays from ``np.zeros`` (pages never
+    ``intensity`` and ``labels`` are full-size arrays of ``untouched_zeros`` (pages never
     written cost no memory); a tile once painted holds exactly the values ``rasterize``
     gives there. ``filled`` marks the painted tiles, ``(ceil(H / tile_px),
     ceil(W / tile_px))`` uint8."""
@@ -442,8 +451,8 @@ class TiledMarkingMap:
         self.origin_m = (xmin, ymax)
         self.resolution_m = float(resolution_m)
         self.tile_px = tile_px
-        self.intensity = np.zeros((n_rows, n_cols), dtype=np.uint8)
-        self.labels = np.zeros((n_rows, n_cols), dtype=np.uint8)
+        self.intensity = untouched_zeros((n_rows, n_cols))
+        self.labels = untouched_zeros((n_rows, n_cols))
         self.filled = np.zeros((-(-n_rows // tile_px), -(-n_cols // tile_px)), np.uint8)
         t = track.table
         gaps = track.gaps

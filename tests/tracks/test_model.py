@@ -160,3 +160,18 @@ def test_a_gap_of_negative_length_is_refused() -> None:
     with pytest.raises(ValueError, match="gap's length_m must be ≥ 0"):
         Gap(Line.RIGHT, 1.0, -0.1)
     assert Gap(Line.RIGHT, 1.0, 0.0).length_m == 0.0
+
+
+def test_tracks_with_the_same_road_share_their_index() -> None:
+    """A copy with other cartons or gaps (the env drops the cartons) reuses the spatial
+    index; another road gets its own."""
+    from dataclasses import replace as _replace
+
+    from tfalda_sim.tracks import generate
+
+    track = generate(3)
+    bare = _replace(track, obstacles=(), gaps=())
+    assert bare.index is track.index
+    assert generate(4).index is not track.index
+    x, y = track.position(1.0, -0.2)
+    assert bare.locate(float(x), float(y)) == track.locate(float(x), float(y))

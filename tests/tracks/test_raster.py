@@ -112,3 +112,47 @@ def test_map_is_deterministic() -> None:
     a, b = rasterize(load_named("figure-eight")), rasterize(load_named("figure-eight"))
     assert np.array_equal(a.intensity, b.intensity) and np.array_equal(a.labels, b.labels)
     assert math.isclose(a.origin_m[0], b.origin_m[0])
+
+
+# ---------------------------------------------------------------- painted tile by tile
+def test_tile_wise_raster_equals_whole_raster() -> None:
+    """Tiles painted on demand, in random batches, hold exactly the whole map's values
+    (intensity and labels) and the rest stays 0: on generated tracks with cartons, gaps
+    and crossings, and on the named ones."""
+    from tests.conftest import generated
+    from tfalda_sim.tracks.raster import TiledMarkingMap
+
+    rng = np.random.default_rng(0)
+    eight = next(generated(s) for s in range(100) if generated(s).intersections)
+    for track in (generated(2), generated(9), eight, load_named("thesis"), strip(0.37)):
+        whole = rasterize(track)
+        for tile_px in (32, 57):
+            tiled = TiledMarkingMap(track, tile_px=tile_px)
+            for _ in range(3):
+                tiled.fill(rng.random(tiled.filled.shape) < 0.3)
+            rows, cols = whole.shape
+            done = np.repeat(np.repeat(tiled.filled.astype(bool), tile_px, 0), tile_px, 1)
+            done = done[:rows, :cols]
+            assert 0.2 < done.mean() < 0.9
+            np.testing.assert_array_equal(tiled.intensity[done], whole.intensity[done])
+            np.testing.assert_array_equal(tiled.labels[done], whole.labels[done])
+            assert not tiled.intensity[~done].any() and not tiled.labels[~done].any()
+            full = tiled.fill_all()
+            assert tiled.complete and full.origin_m == whole.origin_m
+            np.testing.assert_array_equal(full.intensity, whole.intensity)
+            np.testing.assert_array_equal(full.labels, whole.labels)
+
+
+def test_tight_and_wide_arcs_are_painted_whole() -> None:
+    """The arc chunks' row spans skip only pixels outside the road: a full circle of a
+    tight, a medium and a wide radius paints its lines' whole area."""
+    from tfalda_sim.tracks import Arc
+
+    for radius in (0.45, 1.0, 6.0):
+        track = Track((Arc(radius, 2 * math.pi),), closed=True)
+        m = rasterize(track)
+        painted = m.intensity.astype(np.float64).sum() / 255.0 * m.resolution_m**2
+        w = LINE_WIDTH_M
+        solid = 2 * math.pi * ((radius + 0.4) + max(0.0, radius - 0.4)) * w
+        dashed = 0.5 * 2 * math.pi * radius * w
+        assert painted == pytest.approx(solid + dashed, rel=0.02), radius

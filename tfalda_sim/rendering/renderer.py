@@ -292,28 +292,52 @@ def _pack_pieces(boxes: np.ndarray, reads: np.ndarray, cuts: np.ndarray
     return out, tex_at
 
 
+FOOTPRINT_BLOCK_PX: int = 16
+"""Edge of the image blocks [px] whose ground hits are boxed separately for a lazy scene:
+boxes of small blocks hug the frame's footprint (one box per window would also cover the
+ground between the ROIs)."""
+
+
 @njit(cache=True)
 def _level_bounds(rows: np.ndarray, cols: np.ndarray, widths: np.ndarray,
                   coord_a: np.ndarray, coord_b: np.ndarray, level: np.ndarray,
-                  flags: np.ndarray, levels: int) -> np.ndarray:
-    """Per mip level, the car-frame box ``(x_min, x_max, y_min, y_max)`` [m] of the ground
-    hits of the pieces' pixels that read it (min > max where none does): what a lazy
-    scene must have filled before these pixels are sampled."""
-    out = np.empty((levels, 4))
-    out[:, 0] = out[:, 2] = math.inf
-    out[:, 1] = out[:, 3] = -math.inf
+                  flags: np.ndarray, levels: int, block: int) -> np.ndarray:
+    """Per image block of ``block`` × ``block`` px and mip level, the car-frame box of
+    the ground hits of the pieces' pixels that read that level: ``(n, 5)`` rows ``(level,
+    x_min, x_max, y_min, y_max)`` [m] — what a lazy scene must have filled before these
+    pixels are sampled."""
+    h, w = flags.shape
+    nbr = (h + block - 1) // block
+    nbc = (w + block - 1) // block
+    box = np.empty((nbr, nbc, levels, 4))
+    box[..., 0] = box[..., 2] = math.inf
+    box[..., 1] = box[..., 3] = -math.inf
     for t in range(len(rows)):
         r = rows[t]
         for c in range(cols[t], cols[t] + widths[t]):
             if not flags[r, c] & 1:
                 continue
-            lv = level[r, c]
+            b = box[r // block, c // block, level[r, c]]
             x = coord_a[r, c]
             y = coord_b[r, c]
-            out[lv, 0] = min(out[lv, 0], x)
-            out[lv, 1] = max(out[lv, 1], x)
-            out[lv, 2] = min(out[lv, 2], y)
-            out[lv, 3] = max(out[lv, 3], y)
+            b[0] = min(b[0], x)
+            b[1] = max(b[1], x)
+            b[2] = min(b[2], y)
+            b[3] = max(b[3], y)
+    n = 0
+    for i in range(nbr):
+        for j in range(nbc):
+            for lv in range(levels):
+                n += box[i, j, lv, 0] <= box[i, j, lv, 1]
+    out = np.empty((n, 5))
+    k = 0
+    for i in range(nbr):
+        for j in range(nbc):
+            for lv in range(levels):
+                if box[i, j, lv, 0] <= box[i, j, lv, 1]:
+                    out[k, 0] = lv
+                    out[k, 1:] = box[i, j, lv]
+                    k += 1
     return out
 
 
@@ -341,7 +365,7 @@ class _Stack:
     zero_len: int
     out_len: int
     window_offsets: list[int]
-    level_bounds: np.ndarray  # (levels, 4): per mip level, car-frame box of the ground hits
+    level_bounds: np.ndarray  # (n, 5): level and car-frame box of the ground hits per block
 
 
 @dataclass(frozen=True)
@@ -700,7 +724,7 @@ class Renderer:
                        window_offsets=window_offsets.tolist(),
                        level_bounds=_level_bounds(s_rows, s_cols, s_widths, layout.coord_a,
                                                   layout.coord_b, layout.level, layout.flags,
-                                                  layout.levels))
+                                                  layout.levels, FOOTPRINT_BLOCK_PX))
         if len(self._stacks) >= 32:
             self._stacks.pop(next(iter(self._stacks)))
         self._stacks[key] = stack

@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 
 from tfalda_sim.tracks import MarkingMap, Track, rasterize
-from tfalda_sim.tracks.raster import TILE_PX, TiledMarkingMap
+from tfalda_sim.tracks.raster import TILE_PX, TiledMarkingMap, untouched_zeros
 from tfalda_sim.tracks.rules import obstacle_corners
 
 from .effects import Effects
@@ -78,9 +78,9 @@ class Scene:
 
     def prepare(self, bounds: np.ndarray, affines: np.ndarray) -> None:
         """Fill the atlas under a view before it is sampled (a no-op once all is filled):
-        ``bounds`` ``(levels, 4)`` per mip level the car-frame box ``(x_min, x_max, y_min,
-        y_max)`` [m] of the ground hits read at that level (empty: min > max); ``affines``
-        ``(k, 6)`` the car poses' maps car frame → level-0 texels (see ``Renderer``)."""
+        ``bounds`` ``(n, 5)`` rows ``(level, x_min, x_max, y_min, y_max)``, car-frame boxes
+        [m] of the ground hits read at a mip level; ``affines`` ``(k, 6)`` the car poses'
+        maps car frame → level-0 texels (see ``Renderer``)."""
         if self.tiles is not None and not self.tiles.complete:
             self.tiles.ensure(bounds, affines)
 
@@ -159,20 +159,20 @@ def _mark_needed(bounds: np.ndarray, affines: np.ndarray, size0_x: float, size0_
                  sizes: np.ndarray, tile: np.ndarray, grids: np.ndarray, offsets: np.ndarray,
                  filled: np.ndarray, need: np.ndarray) -> int:
     """Mark in ``need`` the unfilled tiles that bilinear taps of a view may read (see
-    ``Scene.prepare``); returns how many. Conservative: the level-0 texel box of the
-    ground hits, clamped like the renderer's maps, then two texels more at each level."""
+    ``Scene.prepare``); returns how many. Conservative: per box, the level-0 texel box of
+    its corners under every pose, clamped like the renderer's maps, then two texels more
+    at its level."""
     count = 0
-    for lv in range(sizes.shape[0]):
-        if bounds[lv, 0] > bounds[lv, 1]:
-            continue  # no pixel reads this level
+    for n in range(bounds.shape[0]):
+        lv = int(bounds[n, 0])
         x_lo = math.inf
         x_hi = -math.inf
         y_lo = math.inf
         y_hi = -math.inf
         for k in range(affines.shape[0]):
             a = affines[k]
-            for gx in (bounds[lv, 0], bounds[lv, 1]):
-                for gy in (bounds[lv, 2], bounds[lv, 3]):
+            for gx in (bounds[n, 1], bounds[n, 2]):
+                for gy in (bounds[n, 3], bounds[n, 4]):
                     x = min(max(a[0] * gx + a[1] * gy + a[2], -2.0), size0_x + 1.0)
                     y = min(max(a[3] * gx + a[4] * gy + a[5], -2.0), size0_y + 1.0)
                     x_lo = min(x_lo, x)
@@ -260,7 +260,7 @@ class MipTiles:
     """The marking levels of a lazy scene's atlas, filled tile by tile as views need
     them: a tile of level 0 is painted by the marking map, a tile of level L is the box
     average of the tiles of level L − 1 under it. Filled tiles hold exactly the eager
-    atlas's texels; the rest of the atlas is still ``np.zeros`` (no memory)."""
+    atlas's texels; the rest of the atlas is untouched zeros (no memory)."""
 
     def __init__(self, marking: TiledMarkingMap, atlas: np.ndarray, sizes: list[tuple[int, int]],
                  origins: list[tuple[int, int]], worn: np.ndarray | None) -> None:
@@ -427,7 +427,7 @@ def build_scene(track: Track, effects: Effects | None = None,
         worn = _wear_noise(rng, shape, fx.wear) if fx.wear > 0 else None
         wall = _cached_wall_texture(rng, hall)
         (height, width), sizes, level_xy, wall_origin = _atlas_layout(shape, wall.shape)
-        atlas = np.zeros((height, width), np.uint8)  # calloc: unfilled tiles cost nothing
+        atlas = untouched_zeros((height, width))  # unfilled tiles cost nothing
         wx, wy = wall_origin
         atlas[wy:wy + wall.shape[0], wx:wx + wall.shape[1]] = wall
         atlas[wy:wy + wall.shape[0], wx + wall.shape[1]] = wall[:, 0]  # wraps (see _atlas)

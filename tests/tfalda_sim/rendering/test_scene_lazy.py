@@ -1,0 +1,178 @@
+"""Lazy scenes (issue 18): the marking map and its mip levels are filled tile by tile as
+the renderer looks at them, and every frame equals the eager scene's bit for bit."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import cv2
+import numpy as np
+import pytest
+
+from tests.conftest import generated
+from tfalda_sim.rendering import DomainRandomization, Effects, Renderer, build_scene
+from tfalda_sim.rendering.scene import (
+    MipTiles,
+    _atlas,
+    _atlas_layout,
+    _level_sizes,
+    _mip_tiles,
+    _propagate,
+)
+from tfalda_sim.tracks import Track, load_named
+from tfalda_sim.tracks.raster import TiledMarkingMap, untouched_zeros
+
+ROIS = [(195, 260, 150, 75), (365, 260, 150, 75), (80, 340, 180, 85), (429, 340, 180, 85)]
+
+
+@pytest.fixture(scope="module")
+def renderer() -> Renderer:
+    return Renderer()
+
+
+def _effects(kind: str, seed: int) -> tuple[Effects, int]:
+    """Effects and the scene seed: default, "off", or randomised with wear, shadows and
+    glare spots forced on (the lazy paths of all three)."""
+    if kind == "default":
+        return Effects(), 0
+    if kind == "off":
+        return Effects.off(), 0
+    fx = DomainRandomization().sample(np.random.default_rng(seed))
+    return replace(fx, wear=max(fx.wear, 0.3), shadows=max(fx.shadows, 2),
+                   glare_spots=max(fx.glare_spots, 2)), 1000 + seed
+
+
+def _poses(track: Track, n: int, seed: int) -> list[tuple[float, float, float]]:
+    """Car poses anywhere on the loop (far from the start too), across the road, turned."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(n):
+        s = track.length_m * (k + rng.random()) / n
+        x, y, h = track.pose(s, float(rng.uniform(-0.35, 0.35)))
+        out.append((float(x), float(y), float(h) + float(rng.uniform(-0.5, 0.5))))
+    return out
+
+
+@pytest.mark.parametrize("seed", [3, 7, 19])
+@pytest.mark.parametrize("kind", ["default", "off", "randomised"])
+def test_lazy_frames_equal_eager_frames(renderer: Renderer, seed: int, kind: str) -> None:
+    track = generated(seed)  # with its cartons
+    assert track.obstacles or seed != 19  # at least some of these tracks have cartons
+    fx, scene_seed = _effects(kind, seed)
+    eager = build_scene(track, fx, np.random.default_rng(scene_seed), lazy=False)
+    lazy = build_scene(track, fx, np.random.default_rng(scene_seed))
+    assert eager.tiles is None and lazy.tiles is not None
+    for k, pose in enumerate(_poses(track, 6, seed)):
+        speed = (0.0, 2.5)[k % 2]  # motion blur on every other pose
+        want = renderer.render_windows(eager, pose, ROIS, speed_m_s=speed, frame_seed=k)
+        got = renderer.render_windows(lazy, pose, ROIS, speed_m_s=speed, frame_seed=k)
+        for w, g in zip(want, got, strict=True):
+            np.testing.assert_array_equal(g, w)
+        if k % 3 == 0:
+            np.testing.assert_array_equal(
+                renderer.render(lazy, pose, speed_m_s=speed, frame_seed=k),
+                renderer.render(eager, pose, speed_m_s=speed, frame_seed=k))
+    assert not lazy.tiles.complete  # a few views fill only part of the map
+    lazy.fill_all()
+    np.testing.assert_array_equal(lazy.atlas, eager.atlas)
+    np.testing.assert_array_equal(lazy.level_origin, eager.level_origin)
+    assert (lazy.wall_origin, lazy.wall_size, lazy.level0_size, lazy.origin) == (
+        eager.wall_origin, eager.wall_size, eager.level0_size, eager.origin)
+    if eager.light is not None:
+        np.testing.assert_array_equal(lazy.light, eager.light)
+
+
+def test_lazy_scene_on_named_tracks_and_a_far_start(renderer: Renderer) -> None:
+    for name in ("thesis", "figure-eight"):
+        track = load_named(name)
+        eager = build_scene(track, lazy=False)
+        lazy = build_scene(track)
+        # The far end of the loop first: nothing near the start is filled before.
+        for pose in _poses(track, 4, 1)[::-1]:
+            np.testing.assert_array_equal(renderer.render(lazy, pose, frame_seed=3),
+                                          renderer.render(eager, pose, frame_seed=3))
+
+
+def test_a_roi_view_fills_a_small_part_of_the_map(renderer: Renderer) -> None:
+    track = replace(generated(5), name="a fresh copy")  # another track: its own map
+    scene = build_scene(track, Effects())
+    renderer.render_windows(scene, _poses(track, 1, 0)[0], ROIS)
+    filled = scene.tiles.marking.filled
+    assert 0 < filled.mean() < 0.15
+
+
+def test_lazy_scene_draws_the_same_random_numbers() -> None:
+    """Everything random is drawn at build time, in the eager order: the generator ends
+    in the same state, so whatever the env draws next does not change."""
+    track = generated(7)
+    fx, _ = _effects("randomised", 7)
+    a, b = np.random.default_rng(5), np.random.default_rng(5)
+    build_scene(track, fx, a, lazy=False)
+    build_scene(track, fx, b)
+    assert a.bit_generator.state == b.bit_generator.state
+    # A cached wall texture leaves the generator where drawing it would.
+    c = np.random.default_rng(5)
+    build_scene(track, fx, c)
+    assert c.bit_generator.state == a.bit_generator.state
+
+
+def test_tile_wise_mips_equal_whole_mips() -> None:
+    """Level L of the atlas filled tile by tile, in any order, equals OpenCV's INTER_AREA
+    halving of the whole level L − 1 (odd sizes and partial tiles included)."""
+    rng = np.random.default_rng(0)
+    for shape0 in ((300, 517), (257, 129), (64, 64), (1000, 333)):
+        level0 = rng.integers(0, 256, shape0, dtype=np.uint8)
+        level0[rng.random(shape0) < 0.5] = 0  # runs of mat, as on a map
+        wall = rng.integers(0, 256, (20, 40), dtype=np.uint8)
+        eager, origins, wall_origin = _atlas(level0, wall)
+        (height, width), sizes, level_xy, wall_xy = _atlas_layout(shape0, wall.shape)
+        assert (height, width) == eager.shape and wall_xy == wall_origin
+        np.testing.assert_array_equal(np.array(level_xy, np.float32), origins)
+        assert sizes == _level_sizes(shape0)
+        for tile0 in (1, 8, 32):
+            atlas = untouched_zeros((height, width))
+            g = 4
+            atlas[g:g + shape0[0], g:g + shape0[1]] = level0
+            t = MipTiles.__new__(MipTiles)  # only the tiling: no marking map
+            t.sizes = np.array(sizes, np.int64)
+            t.origins = np.array(level_xy, np.int64)
+            t.tile = np.array([max(1, tile0 >> lv) for lv in range(len(sizes))], np.int64)
+            t.grids = -(-t.sizes // t.tile[:, None])
+            counts = t.grids[:, 0] * t.grids[:, 1]
+            t.offsets = np.concatenate(([0], np.cumsum(counts)[:-1])).astype(np.int64)
+            filled = np.zeros(int(counts.sum()), np.uint8)
+            filled[:counts[0]] = 1  # level 0 is there
+            for _ in range(3):  # random batches of the coarsest level's tiles
+                need = np.zeros_like(filled)
+                top = len(sizes) - 1
+                n_top = int(counts[top])
+                need[t.offsets[top]:t.offsets[top] + n_top] = rng.random(n_top) < 0.5
+                need &= filled == 0
+                _propagate(need, filled, t.sizes, t.tile, t.grids, t.offsets)
+                _mip_tiles(atlas, t.origins, need, t.sizes, t.tile, t.grids, t.offsets)
+                filled |= need
+            need = (filled == 0).astype(np.uint8)
+            _propagate(need, filled, t.sizes, t.tile, t.grids, t.offsets)
+            _mip_tiles(atlas, t.origins, need, t.sizes, t.tile, t.grids, t.offsets)
+            wx, wy = wall_xy
+            atlas[wy:wy + 20, wx:wx + 40] = wall
+            atlas[wy:wy + 20, wx + 40] = wall[:, 0]
+            np.testing.assert_array_equal(atlas, eager)
+            # and each level is INTER_AREA of the one below, as the eager atlas makes it
+            for lv in range(1, len(sizes)):
+                (r, c), (pr, pc) = sizes[lv], sizes[lv - 1]
+                (x, y), (px, py) = level_xy[lv], level_xy[lv - 1]
+                below = atlas[py:py + pr, px:px + pc][:2 * r, :2 * c]
+                np.testing.assert_array_equal(
+                    atlas[y:y + r, x:x + c],
+                    cv2.resize(below, (c, r), interpolation=cv2.INTER_AREA))
+
+
+def test_scenes_of_one_track_share_its_marking_map() -> None:
+    track = generated(11)
+    a = build_scene(track, Effects())
+    b = build_scene(replace(track, name=track.name), Effects.off())  # an equal track
+    assert a.tiles.marking is b.tiles.marking
+    c = build_scene(generated(12), Effects())
+    assert c.tiles.marking is not a.tiles.marking
+    assert isinstance(c.tiles.marking, TiledMarkingMap)
