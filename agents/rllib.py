@@ -336,8 +336,8 @@ def train_rllib(timesteps: int, seed: int, out: Path, *, config: RllibConfig | N
                 ) -> dict[str, Any]:
     """Train PPO with RLlib for ``ceil(timesteps / train_batch)`` iterations and save it
     under ``out``; returns the summary written to train.json. ``address`` a Ray cluster
-    ("auto", HOST:PORT; None: a local Ray with ``num_cpus`` CPUs, default enough for the
-    env runners); ``progress``: a bar and a line per iteration (env steps, steps/s, mean
+    ("auto", HOST:PORT; None: a local Ray with ``num_cpus`` CPUs, default the env runners'
+    and at least 2); ``progress``: a bar and a line per iteration (env steps, steps/s, mean
     episode return) on stderr; ``on_iteration(it, iterations)`` after each iteration.
 
     Staged beside ``out`` and moved in at the end: an error before the first iteration
@@ -364,7 +364,7 @@ def train_rllib(timesteps: int, seed: int, out: Path, *, config: RllibConfig | N
     staging = Path(tempfile.mkdtemp(prefix=".tfalda-sim-", suffix=".tmp",
                                     dir=_existing_ancestor(out)))
     try:
-        session.enter_context(ray_session(address, num_cpus or max(1, cfg.env_runners)))
+        session.enter_context(ray_session(address, num_cpus or max(2, cfg.env_runners)))
         cpus = int(ray.cluster_resources().get("CPU", 0))
         if cfg.env_runners > cpus:
             where = f"the Ray cluster at {address}" if address else "this Ray"
