@@ -374,7 +374,15 @@ def train_rllib(timesteps: int, seed: int, out: Path, *, config: RllibConfig | N
         shield.callback(bar.close)
         t_start = time.perf_counter()
         try:
-            algo = ppo_config(env_cfg, cfg, seed).build_algo()
+            try:
+                algo = ppo_config(env_cfg, cfg, seed).build_algo()
+            except Exception as exc:  # e.g. a node without tfalda-sim, an env that raises
+                if is_interrupt(exc):
+                    raise
+                text = str(exc).strip().splitlines()
+                raise RllibUnavailable(f"RLlib could not start its env runners: "
+                                       f"{type(exc).__name__}: {text[-1] if text else ''}"
+                                       ) from None
             steps = 0
             for k in range(1, iterations + 1):
                 t0 = time.perf_counter()
@@ -394,6 +402,8 @@ def train_rllib(timesteps: int, seed: int, out: Path, *, config: RllibConfig | N
                 raise
             interrupted = True  # keep the last finished iteration
             shield.enter_context(ignoring_stops())
+        except RllibUnavailable:
+            raise
         except Exception as exc:
             failed = _runner_error(exc)
             if failed is None:

@@ -209,3 +209,16 @@ def test_no_ray_cluster_at_the_address_is_a_clear_error(
                        "--out", str(tmp_path / "run"))
     assert code == 2 and "could not connect to the Ray cluster at auto" in err, err
     assert not ray.is_initialized() and not (tmp_path / "run").exists()
+
+
+@needs_rllib
+def test_an_env_that_cannot_start_is_a_clear_error(tmp_path: Path) -> None:
+    """A worker whose env raises (as on a node without tfalda-sim): one line naming the
+    error, Ray shut down, nothing written."""
+    import ray
+
+    with pytest.raises(rllib.RllibUnavailable, match="could not start its env runners: "
+                                                      "ValueError: unknown track"):
+        rllib.train_rllib(64, 0, tmp_path / "run", config=rllib.RllibConfig(
+            train_batch=32, env_runners=1), track="no-such-track", progress=False)
+    assert not ray.is_initialized() and not list(tmp_path.iterdir())
