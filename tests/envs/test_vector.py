@@ -1,0 +1,134 @@
+"""``gymnasium.make_vec("TfaldaTrack-v0")``: the worker-process vector env equals
+Gymnasium's SyncVectorEnv bit for bit, and fails cleanly."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode
+
+import tfalda_sim  # noqa: F401
+from tfalda_sim.envs.vector import TfaldaTrackVectorEnv
+
+STEPS = 120
+
+
+def rollout(venv: gym.vector.VectorEnv, seed: int, steps: int = STEPS) -> list[Any]:
+    """Observations, rewards, flags and infos of a random-action rollout (copied)."""
+    obs, info = venv.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    out: list[Any] = [obs, info]
+    shape = venv.action_space.shape
+    for _ in range(steps):
+        # Hard steering: episodes end (off the road), so autoresets happen.
+        action = rng.uniform(-0.2, 1.0, shape).astype(np.float32)
+        out.append(venv.step(action))
+    venv.close()
+    return out
+
+
+def assert_same(a: Any, b: Any) -> None:
+    if isinstance(a, dict):
+        assert a.keys() == b.keys()
+        for key in a:
+            assert_same(a[key], b[key])
+    elif isinstance(a, tuple | list):
+        assert len(a) == len(b)
+        for x, y in zip(a, b, strict=True):
+            assert_same(x, y)
+    else:
+        a, b = np.asarray(a), np.asarray(b)
+        assert a.dtype == b.dtype and a.shape == b.shape
+        assert np.array_equal(a, b)
+
+
+def test_make_vec_defaults_to_the_worker_vector_env() -> None:
+    venv = gym.make_vec("TfaldaTrack-v0", num_envs=2)
+    try:
+        assert isinstance(venv.unwrapped, TfaldaTrackVectorEnv)
+        assert venv.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP
+        assert venv.observation_space.shape == (2, 42)
+        assert venv.action_space.shape == (2, 1)
+    finally:
+        venv.close()
+
+
+@pytest.mark.parametrize(("num_envs", "workers", "kwargs"), [
+    (2, None, {}),                                  # one worker per env (2 CPUs)
+    (3, 2, {"track": "oval", "max_laps": 1}),       # uneven slices: 2 + 1 envs
+    (2, 1, {}),                                     # in this process
+    (2, 2, {"observation": "dict", "obstacles": True}),  # images through shared memory
+])
+def test_rollouts_equal_sync_vector_env(num_envs: int, workers: int | None,
+                                        kwargs: dict[str, Any]) -> None:
+    ours = rollout(TfaldaTrackVectorEnv(num_envs, workers=workers, **kwargs), seed=5)
+    sync = rollout(gym.make_vec("TfaldaTrack-v0", num_envs=num_envs,
+                                vectorization_mode="sync", **kwargs), seed=5)
+    assert_same(ours, sync)
+    # The rollout did reset some env on its own (else autoreset went untested).
+    assert any(np.any(step[2] | step[3]) for step in ours[2:])
+
+
+def test_same_seed_same_rollout_and_another_seed_differs() -> None:
+    a = rollout(gym.make_vec("TfaldaTrack-v0", num_envs=2), seed=11, steps=30)
+    b = rollout(gym.make_vec("TfaldaTrack-v0", num_envs=2), seed=11, steps=30)
+    c = rollout(gym.make_vec("TfaldaTrack-v0", num_envs=2), seed=12, steps=30)
+    assert_same(a, b)
+    assert not np.array_equal(a[0], c[0])
+
+
+def test_returned_observations_are_copies() -> None:
+    venv = gym.make_vec("TfaldaTrack-v0", num_envs=2, track="oval")
+    try:
+        first, _ = venv.reset(seed=0)
+        kept = first.copy()
+        venv.step(np.zeros((2, 1), np.float32))
+        assert np.array_equal(first, kept)
+    finally:
+        venv.close()
+
+
+def test_a_bad_action_raises_the_envs_error_and_the_env_goes_on() -> None:
+    venv = gym.make_vec("TfaldaTrack-v0", num_envs=2, track="oval")
+    try:
+        venv.reset(seed=0)
+        with pytest.raises(ValueError, match="finite"):
+            venv.step(np.array([[0.0], [np.nan]], np.float32))
+        with pytest.raises(ValueError, match="one action per env"):
+            venv.step(np.zeros((3, 1), np.float32))
+        obs, *_ = venv.step(np.zeros((2, 1), np.float32))  # the pipes stayed in step
+        assert obs.shape == (2, 42)
+    finally:
+        venv.close()
+
+
+def test_bad_arguments_fail_before_any_worker_starts() -> None:
+    with pytest.raises(ValueError, match="unknown track"):
+        gym.make_vec("TfaldaTrack-v0", num_envs=2, track="nowhere")
+    with pytest.raises(ValueError, match="num_envs"):
+        TfaldaTrackVectorEnv(0)
+    with pytest.raises(ValueError, match="workers"):
+        TfaldaTrackVectorEnv(2, workers=0)
+    venv = TfaldaTrackVectorEnv(2)
+    try:
+        with pytest.raises(ValueError, match="one seed per env"):
+            venv.reset(seed=[1, 2, 3])
+    finally:
+        venv.close()
+
+
+def test_call_and_close() -> None:
+    venv = TfaldaTrackVectorEnv(2, workers=2, track="oval")
+    venv.reset(seed=0)
+    assert venv.get_attr("observation_mode")[0].value == "lanes"
+    frames = venv.call("camera_frame")
+    assert len(frames) == 2 and frames[0].shape == (480, 752)
+    procs = list(venv._procs)
+    venv.close()
+    assert all(not p.is_alive() for p in procs)
+    with pytest.raises(RuntimeError, match="closed"):
+        venv.step(np.zeros((2, 1), np.float32))
+    venv.close()  # twice is fine
