@@ -12,7 +12,7 @@ $(BIN)/.installed: pyproject.toml
 	# torch first, pinned to the local CPU wheel, so that stable-baselines3 (the rl extra)
 	# never makes pip fetch another torch with gigabytes of CUDA.
 	$(BIN)/python -m pip install --quiet torch==2.13.0
-	$(BIN)/python -m pip install --quiet -e '.[dev,rl,ray]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,rl,ray,rllib]'
 	# numba's on-disk cache pickles the module name of each kernel: entries compiled before
 	# a package moved (tracks -> tfalda_sim.tracks) would name a module that is gone.
 	find tfalda_sim tracks envs agents -name '*.nb[ic]' -delete
@@ -35,6 +35,7 @@ bench: install
 	$(BIN)/python benchmarks/bench_tracks.py
 	$(BIN)/python benchmarks/bench_render.py
 	$(BIN)/python benchmarks/bench_perception.py
+	$(BIN)/python benchmarks/bench_reset.py
 	$(BIN)/python benchmarks/bench_env.py
 
 # The charts and figures of docs/evaluation.md (about 5 min on 2 cores).
