@@ -13,7 +13,10 @@ keeps the listing's initial end x = 0.
 
 Speed: the pixels of a segment depend only on ``D`` (and the image height), not on the
 start, so for one ``D`` the sums of all starts are a few shifted row additions, which
-vectorise; that is ``W² · H`` additions in SIMD instead of ``W²`` scalar line walks.
+vectorise; that is ``W² · H`` additions in SIMD instead of ``W²`` scalar line walks. The
+row additions are padded to whole blocks of ``SIMD_BLOCK`` lanes: LLVM vectorises them
+``SIMD_BLOCK`` int32 at a time and runs shorter rests as scalar code, which most of a
+ROI's rows were (a resampled ROI is 75–90 px wide; the rows of steep ``D`` are shorter).
 """
 
 from __future__ import annotations
@@ -45,15 +48,23 @@ def segment_pixels(x0: int, x1: int, height: int) -> list[tuple[int, int]]:
     return [(x0 + line_offset(i, dx, n), line_offset(i, dy, n)) for i in range(n)]
 
 
+SIMD_BLOCK: int = 32
+"""Lanes per padded row addition of the candidate search [int32 values]: what LLVM's
+vectoriser takes per iteration here (4 × 8 lanes of AVX2; rests shorter than a block ran
+as scalar code)."""
+
+
 @njit(cache=True, error_model="numpy")
 def search_candidates(flat: np.ndarray, height: int, width: int, best_i: np.ndarray,
                       best_end: np.ndarray, sums: np.ndarray) -> None:
     """For every start x of the top row of an image (``flat``: its ``height`` × ``width``
-    pixels row by row, int32): the largest segment sum over all end x of the bottom row
-    (``best_i``, int32) and that end x (``best_end``, int32); ``sums`` is int32 scratch of
-    length ≥ width. (int32 pixels and slices of the flat array keep the inner loops plain
-    vector additions.)"""
+    pixels row by row, int32, followed by at least ``SIMD_BLOCK`` padding values): the
+    largest segment sum over all end x of the bottom row (``best_i``, int32) and that end
+    x (``best_end``, int32); ``sums`` is int32 scratch of length ≥ width + ``SIMD_BLOCK``.
+    (int32 pixels and slices of the flat array keep the inner loops plain vector
+    additions; each row addition runs over whole blocks, its extra lanes are never read.)"""
     w = width
+    block = SIMD_BLOCK
     for x in range(w):
         best_i[x] = 0
         best_end[x] = 0
@@ -63,7 +74,8 @@ def search_candidates(flat: np.ndarray, height: int, width: int, best_i: np.ndar
         n = max(adx, dy) + 1
         lo = max(0, -dx)
         m = min(w, w - dx) - lo
-        acc = sums[:m]
+        padded = (m + block - 1) // block * block
+        acc = sums[:padded]
         acc[:] = 0
         # Sample i sits at round(i·adx/(n−1)), round(i·dy/(n−1)) (halves away from zero),
         # stepped with remainders instead of two integer divisions per sample.
@@ -83,8 +95,8 @@ def search_candidates(flat: np.ndarray, height: int, width: int, best_i: np.ndar
                     ry -= den
                     y += 1
             start = y * w + (lo + ox if dx >= 0 else lo - ox)
-            seg = flat[start:start + m]
-            for k in range(m):
+            seg = flat[start:start + padded]
+            for k in range(padded):
                 acc[k] += seg[k]
         for k in range(m):  # branch-free update: vectorises
             x = lo + k
@@ -130,7 +142,8 @@ def candidates(gradient: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     h, w = gradient.shape
     best_i = np.empty(w, np.int32)
     best_end = np.empty(w, np.int32)
-    search_candidates(gradient.astype(np.int32).ravel(), h, w, best_i, best_end,
-                      np.empty(w, np.int32))
+    flat = np.zeros(h * w + SIMD_BLOCK, np.int32)  # the padding the blocks read past the end
+    flat[:h * w] = gradient.ravel()
+    search_candidates(flat, h, w, best_i, best_end, np.empty(w + SIMD_BLOCK, np.int32))
     p = np.arange(w, dtype=np.int64)
     return p, best_end.astype(np.int64) - p, best_i.astype(np.int64)
