@@ -147,3 +147,43 @@ def candidates(gradient: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     search_candidates(flat, h, w, best_i, best_end, np.empty(w + SIMD_BLOCK, np.int32))
     p = np.arange(w, dtype=np.int64)
     return p, best_end.astype(np.int64) - p, best_i.astype(np.int64)
+
+
+@njit(cache=True, error_model="numpy")
+def choose_lane(gradient: np.ndarray, roi_x: float, scale_x: float, first: bool,
+                previous_p_px: float, previous_d_px: float, previous_i: float, kp: float,
+                kd: float, ki: float) -> tuple[float, float, float, float]:
+    """The lane of one ROI from its gradient image, in one call (the detector's per-ROI
+    path, which as a chain of small numpy calls cost as much as the search): the
+    candidates (``candidates``), taken back to image pixels (``P`` of pixel centres ×
+    ``scale_x`` + ``roi_x``, ``D`` × ``scale_x``), then in a ``first`` frame the largest
+    ``I``, else the smallest λ (``distance_lambda``; first of equals, a NaN wins as in
+    ``numpy.argmin``). Returns ``(P, D, I, λ)`` [px, px, -, -], λ NaN in a first frame."""
+    h, w = gradient.shape
+    flat = np.zeros(h * w + SIMD_BLOCK, np.int32)
+    for r in range(h):
+        for c in range(w):
+            flat[r * w + c] = gradient[r, c]
+    best_i = np.empty(w, np.int32)
+    best_end = np.empty(w, np.int32)
+    search_candidates(flat, h, w, best_i, best_end, np.empty(w + SIMD_BLOCK, np.int32))
+    k = 0
+    lam = math.nan
+    if first:
+        for x in range(1, w):
+            if best_i[x] > best_i[k]:
+                k = x
+    else:
+        for x in range(w):
+            # The same float64 operations, in the same order, as distance_lambda on arrays.
+            p_img = (np.float64(x) + 0.5) * scale_x - 0.5 + roi_x
+            d_img = np.float64(best_end[x] - x) * scale_x
+            value = kp * abs(p_img - previous_p_px) + kd * abs(d_img - previous_d_px) \
+                + ki * (previous_i - np.float64(best_i[x]))
+            if math.isnan(value):
+                k, lam = x, value
+                break
+            if x == 0 or value < lam:
+                k, lam = x, value
+    return ((np.float64(k) + 0.5) * scale_x - 0.5 + roi_x,
+            np.float64(best_end[k] - k) * scale_x, np.float64(best_i[k]), lam)

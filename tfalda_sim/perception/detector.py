@@ -13,12 +13,11 @@ Works on any 8-bit grayscale sequence: ``process(frame)`` takes whole frames,
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from .candidates import candidates, distance_lambda, preprocess, sobel_horizontal_edges
+from .candidates import choose_lane, preprocess, sobel_horizontal_edges
 from .lis import LaneInferenceSystem, LisResult, Rows
 from .params import DetectorConfig
 from .rois import (
@@ -222,24 +221,17 @@ class TfaldaDetector:
                       and sobel_horizontal_edges(prev.d, prev.y_bottom - prev.y_top,
                                                  tcfg.sobel_switch_angle_deg))
         grad = preprocess(crop, tcfg, horizontal)
-        p, d, i = candidates(grad)
         # Back to image coordinates (listing A.6 normalize_vector: × resample factor + ROI
-        # offset), pixel centre to pixel centre and with the crop's exact factor [px].
-        fx = roi.width / grad.shape[1]
-        p_img = (p + 0.5) * fx - 0.5 + roi.x
-        d_img = d * fx
-        if prev is None:
-            k = int(np.argmax(i))  # first frame: the largest I (first of equals)
-            lam = math.nan
-        else:
-            kp, kd = tcfg.kp, tcfg.kd
-            if lambda_scale != 1.0:
-                kp, kd = kp / lambda_scale, kd / lambda_scale
-            lam_all = distance_lambda(p_img, d_img, i, prev.p, prev.d, prev.i, kp, kd, tcfg.ki)
-            k = int(np.argmin(lam_all))  # smallest λ (first of equals)
-            lam = float(lam_all[k])
-        return LaneSegment(float(p_img[k]), float(d_img[k]), float(i[k]), float(roi.y),
-                    float(roi.y + height), lam)
+        # offset), pixel centre to pixel centre and with the crop's exact factor [px]; the
+        # first frame takes the largest I, later ones the smallest λ (first of equals).
+        kp, kd = tcfg.kp, tcfg.kd
+        if lambda_scale != 1.0:
+            kp, kd = kp / lambda_scale, kd / lambda_scale
+        p, d, i, lam = choose_lane(
+            grad, float(roi.x), roi.width / grad.shape[1], prev is None,
+            *((prev.p, prev.d, prev.i) if prev is not None else (0.0, 0.0, 0.0)),
+            kp, kd, tcfg.ki)
+        return LaneSegment(p, d, i, float(roi.y), float(roi.y + height), lam)
 
     def _place(self, base: Rows, final: Rows, first: bool) -> StateKind:
         """Place the next frame's ROIs from ``base`` lanes; returns the driving state."""

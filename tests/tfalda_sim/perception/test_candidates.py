@@ -10,6 +10,8 @@ import pytest
 from tfalda_sim.perception import TfaldaConfig
 from tfalda_sim.perception.candidates import (
     candidates,
+    choose_lane,
+    distance_lambda,
     preprocess,
     segment_pixels,
     sobel_horizontal_edges,
@@ -103,3 +105,33 @@ def test_distance_lambda_is_listing_3_1() -> None:
                           kp=2.0, kd=3.0, ki=0.01)
     # 2·|10−12| + 3·|−3+2| + 0.01·(1000−900); 2·|14−12| + 3·|1+2| + 0.01·(1000−1200)
     assert lam.tolist() == [4.0 + 3.0 + 1.0, 4.0 + 9.0 - 2.0]
+
+
+@pytest.mark.parametrize("seed", range(60))
+def test_choose_lane_equals_candidates_lambda_and_argmin(seed: int) -> None:
+    """The detector's fused per-ROI kernel picks what the array functions pick, bit for bit
+    (first frame: largest I; else smallest λ, first of equals, a NaN λ wins)."""
+    rng = np.random.default_rng(seed)
+    h, w = int(rng.integers(2, 45)), int(rng.integers(1, 95))
+    img = rng.integers(0, 256, (h, w), dtype=np.uint8)
+    if seed % 3 == 1:
+        img[rng.random((h, w)) < 0.9] = 0  # ties
+    roi_x, scale = float(rng.integers(0, 600)), float(rng.uniform(1.5, 2.5))
+    p, d, i = candidates(img)
+    p_img, d_img = (p + 0.5) * scale - 0.5 + roi_x, d * scale
+    prev = (float(rng.uniform(0, 752)), float(rng.uniform(-80, 80)),
+            float(rng.uniform(0, 5000)))
+    if seed % 10 == 9:
+        prev = (np.nan, *prev[1:])
+    weights = (float(rng.uniform(0, 5)), float(rng.uniform(0, 5)), float(rng.uniform(0, 1)))
+    for first in (True, False):
+        got = choose_lane(img, roi_x, scale, first, *prev, *weights)
+        if first:
+            k, lam = int(np.argmax(i)), np.nan
+        else:
+            lams = distance_lambda(p_img, d_img, i, *prev, *weights)
+            k = int(np.argmin(lams))
+            lam = float(lams[k])
+        want = (float(p_img[k]), float(d_img[k]), float(i[k]), lam)
+        assert got[:3] == want[:3]
+        assert got[3] == want[3] or (np.isnan(got[3]) and np.isnan(want[3]))
