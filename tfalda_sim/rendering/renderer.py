@@ -251,31 +251,35 @@ def _paint_obstacles(out: np.ndarray, out_offsets: np.ndarray, rows: np.ndarray,
 
 
 @njit(cache=True)
-def _pack_pieces(boxes: np.ndarray, reads: np.ndarray, cuts: np.ndarray
-                 ) -> tuple[np.ndarray, int]:
+def _pack_pieces(boxes: np.ndarray, reads: np.ndarray, cuts: np.ndarray, pack: int
+                 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Cut every row of the windows ``boxes`` ``(k, 4)`` (x, y, w, h) [px] into runs of
     pixels that read the atlas (``reads``) and runs of nothing but ceiling, which are not
     sampled; ``cuts[r]`` lists the columns where row r switches between them, padded with
     the image width. Returns ``(5, n)``: row, first column, width, offset in the output
-    and offset in the sampled buffer (−1 for ceiling runs) of each piece, and the sampled
-    total."""
+    and offset in the sampled buffer of each piece (ceiling runs: the zero tail after the
+    sampled pixels, rounded up to whole rows of ``pack``); ``(4, m)``: row, first column,
+    width and sampled offset of the m sampled pieces; the rows of ``pack`` sampled. One
+    call: the ROIs move every frame, so this runs every frame."""
+    n_cuts = cuts.shape[1]
     n = 0
     for k in range(boxes.shape[0]):
         x0, y0, w, h = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3]
         for r in range(y0, y0 + h):
             n += 1
-            for c in cuts[r]:
-                n += x0 < c < x0 + w
+            for i in range(n_cuts):
+                n += x0 < cuts[r, i] < x0 + w
     out = np.empty((5, n), np.int64)
     t = 0
     out_at = 0
     tex_at = 0
+    n_sampled = 0
     for k in range(boxes.shape[0]):
         x0, y0, w, h = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3]
         for r in range(y0, y0 + h):
             start = x0
-            for i in range(cuts.shape[1] + 1):
-                c = x0 + w if i == cuts.shape[1] else cuts[r, i]
+            for i in range(n_cuts + 1):
+                c = x0 + w if i == n_cuts else cuts[r, i]
                 if c <= start:
                     continue
                 end = min(c, x0 + w)
@@ -284,12 +288,24 @@ def _pack_pieces(boxes: np.ndarray, reads: np.ndarray, cuts: np.ndarray
                 out[0, t], out[1, t], out[2, t], out[3, t] = r, start, width, out_at
                 out[4, t] = tex_at if sampled else -1
                 tex_at += width if sampled else 0
+                n_sampled += sampled
                 out_at += width
                 t += 1
                 start = end
                 if start == x0 + w:
                     break
-    return out, tex_at
+    tex_rows = (tex_at + pack - 1) // pack
+    s_out = np.empty((4, n_sampled), np.int64)
+    m = 0
+    for t in range(n):
+        if out[4, t] >= 0:
+            for q in range(3):
+                s_out[q, m] = out[q, t]
+            s_out[3, m] = out[4, t]
+            m += 1
+        else:
+            out[4, t] = tex_rows * pack
+    return out, s_out, tex_rows
 
 
 FOOTPRINT_BLOCK_PX: int = 16
@@ -299,22 +315,22 @@ ground between the ROIs)."""
 
 
 @njit(cache=True)
-def _level_bounds(rows: np.ndarray, cols: np.ndarray, widths: np.ndarray,
-                  coord_a: np.ndarray, coord_b: np.ndarray, level: np.ndarray,
-                  flags: np.ndarray, levels: int, block: int) -> np.ndarray:
+def _block_bounds(coord_a: np.ndarray, coord_b: np.ndarray, level: np.ndarray,
+                  flags: np.ndarray, levels: int, block: int
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """Per image block of ``block`` × ``block`` px and mip level, the car-frame box of
-    the ground hits of the pieces' pixels that read that level: ``(n, 5)`` rows ``(level,
-    x_min, x_max, y_min, y_max)`` [m] — what a lazy scene must have filled before these
-    pixels are sampled."""
+    the ground hits of all its pixels that read that level — constants of the pixel
+    layout, computed once. Returns ``(start, bounds)``: the rows of block ``b`` (numbered
+    row-major) are ``bounds[start[b]:start[b + 1]]``, each ``(level, x_min, x_max, y_min,
+    y_max)`` [m]."""
     h, w = flags.shape
     nbr = (h + block - 1) // block
     nbc = (w + block - 1) // block
     box = np.empty((nbr, nbc, levels, 4))
     box[..., 0] = box[..., 2] = math.inf
     box[..., 1] = box[..., 3] = -math.inf
-    for t in range(len(rows)):
-        r = rows[t]
-        for c in range(cols[t], cols[t] + widths[t]):
+    for r in range(h):
+        for c in range(w):
             if not flags[r, c] & 1:
                 continue
             b = box[r // block, c // block, level[r, c]]
@@ -324,20 +340,47 @@ def _level_bounds(rows: np.ndarray, cols: np.ndarray, widths: np.ndarray,
             b[1] = max(b[1], x)
             b[2] = min(b[2], y)
             b[3] = max(b[3], y)
-    n = 0
+    start = np.zeros(nbr * nbc + 1, np.int64)
     for i in range(nbr):
         for j in range(nbc):
+            used = 0
             for lv in range(levels):
-                n += box[i, j, lv, 0] <= box[i, j, lv, 1]
-    out = np.empty((n, 5))
+                used += box[i, j, lv, 0] <= box[i, j, lv, 1]
+            start[i * nbc + j + 1] = start[i * nbc + j] + used
+    bounds = np.empty((start[-1], 5))
     k = 0
     for i in range(nbr):
         for j in range(nbc):
             for lv in range(levels):
                 if box[i, j, lv, 0] <= box[i, j, lv, 1]:
-                    out[k, 0] = lv
-                    out[k, 1:] = box[i, j, lv]
+                    bounds[k, 0] = lv
+                    bounds[k, 1:] = box[i, j, lv]
                     k += 1
+    return start, bounds
+
+
+@njit(cache=True)
+def _view_bounds(boxes: np.ndarray, start: np.ndarray, bounds: np.ndarray, block: int,
+                 n_block_cols: int) -> np.ndarray:
+    """The rows of ``_block_bounds`` of every block that the windows ``boxes`` ``(k, 4)``
+    (x, y, w, h) [px] touch: what a lazy scene must have filled before the windows are
+    sampled (whole blocks: a few pixels more than the windows, never fewer)."""
+    n = 0
+    for k in range(boxes.shape[0]):
+        x0, y0, w, h = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3]
+        for i in range(y0 // block, (y0 + h - 1) // block + 1):
+            for j in range(x0 // block, (x0 + w - 1) // block + 1):
+                n += start[i * n_block_cols + j + 1] - start[i * n_block_cols + j]
+    out = np.empty((n, 5))
+    t = 0
+    for k in range(boxes.shape[0]):
+        x0, y0, w, h = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3]
+        for i in range(y0 // block, (y0 + h - 1) // block + 1):
+            for j in range(x0 // block, (x0 + w - 1) // block + 1):
+                for m in range(start[i * n_block_cols + j], start[i * n_block_cols + j + 1]):
+                    for q in range(5):  # element-wise: row slices cost more here
+                        out[t, q] = bounds[m, q]
+                    t += 1
     return out
 
 
@@ -345,12 +388,13 @@ _PACK = 1024
 """Pixels per row of the packed buffers handed to ``cv2.remap``."""
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True, eq=False)  # not frozen: frozen fields cost µs to set, every frame
 class _Stack:
     """The requested windows' row pieces, packed back to back (no padding): piece t is
     image row ``rows[t]``, columns ``cols[t]`` … + ``widths[t]``; its output starts at
     ``out_offsets[t]``, its atlas sample at ``tex_offsets[t]``. The ``s_*`` arrays list the
-    pieces that sample the atlas (pieces of nothing but ceiling do not)."""
+    pieces that sample the atlas (pieces of nothing but ceiling do not). Read-only once
+    made (cached and shared)."""
 
     rows: np.ndarray
     cols: np.ndarray
@@ -380,8 +424,9 @@ class _Layout:
     flags: np.ndarray  # uint8: 1 ground, 2 bonnet, 4 ceiling
     reads_atlas: np.ndarray  # bool per pixel: not ceiling (a constant grey)
     cuts: np.ndarray  # per row: columns where reads_atlas switches, padded with the width
-    level: np.ndarray  # uint8: ground pixels' mip level
-    levels: int  # mip levels of the atlas
+    block_start: np.ndarray  # ``_block_bounds`` of the pixel layout
+    block_bounds: np.ndarray
+    block_cols: int  # image blocks per row
     pixel_key: tuple  # key of its ``_PixelLayout``: what window packings depend on
 
 
@@ -400,7 +445,8 @@ class _PixelLayout:
     flags: np.ndarray
     reads_atlas: np.ndarray
     cuts: np.ndarray
-    level: np.ndarray
+    block_start: np.ndarray
+    block_bounds: np.ndarray
 
 
 @njit(cache=True)
@@ -507,6 +553,8 @@ class Renderer:
         wall_row = np.clip(z / WALL_TEXEL_M, 0.0, scene.wall_size[1] - 1.0)
         f32 = np.float32
         code = np.where(is_ground, level, np.where(ceiling, levels + 1, levels))
+        block_start, block_bounds = _block_bounds(g.gx, g.gy, level, flags, levels,
+                                                  FOOTPRINT_BLOCK_PX)
         return _PixelLayout(
             coord_a=np.where(is_ground, g.gx, wall_col).astype(f32),
             coord_b=np.where(is_ground, g.gy, _PAD).astype(f32),
@@ -517,7 +565,8 @@ class Renderer:
             flags=flags,
             reads_atlas=flags != 4,
             cuts=_switch_columns(flags != 4),
-            level=np.where(is_ground, level, 0).astype(np.uint8),
+            block_start=block_start,
+            block_bounds=block_bounds,
         )
 
     def _build_layout(self, scene: Scene) -> _Layout:
@@ -543,7 +592,9 @@ class Renderer:
         return _Layout(
             coord_a=base.coord_a, coord_b=coord_b, scale=base.scale, bias_x=bias_x,
             bias_y=bias_y, flags=base.flags, reads_atlas=base.reads_atlas, cuts=base.cuts,
-            level=base.level, levels=levels, pixel_key=pixel_key,
+            block_start=base.block_start, block_bounds=base.block_bounds,
+            block_cols=-(-base.flags.shape[1] // FOOTPRINT_BLOCK_PX),
+            pixel_key=pixel_key,
         )
 
     def _buffers(self, st: _Stack, with_light: bool
@@ -634,19 +685,18 @@ class Renderer:
         if blur:
             total = self._buffer("tex_sum", (n_tex + st.zero_len,), np.float32)
             total.fill(0.0)
+        c, s = math.cos(yaw), math.sin(yaw)
+        affines = [self._affine(scene, x - back * c, y - back * s, yaw) for back in shifts]
         if scene.tiles is not None and not scene.tiles.complete:
             # A lazy scene fills what this view reads: the poses of the first and the last
             # blur sample bound the boxes of all of them (one straight shift).
-            ends = {float(shifts[0]), float(shifts[-1])}
-            scene.prepare(st.level_bounds, np.array([
-                self._affine(scene, x - b * math.cos(yaw), y - b * math.sin(yaw), yaw)
-                for b in ends]))
+            scene.prepare(st.level_bounds, np.stack((affines[0], affines[-1])) if blur
+                          else affines[0][None])
         wall_shift = (yaw % (2 * math.pi)) * (scene.hall.distance_m / WALL_TEXEL_M)
         size_x, size_y = float(scene.level0_size[0]), float(scene.level0_size[1])
-        for k, back in enumerate(shifts):
+        for k, affine in enumerate(affines):
             if not st.tex_rows:
                 break
-            affine = self._affine(scene, x - back * math.cos(yaw), y - back * math.sin(yaw), yaw)
             maps_args = (st.s_rows, st.s_cols, st.s_widths, st.s_offsets, layout.coord_a,
                          layout.coord_b)
             _atlas_maps(maps[0].reshape(-1), maps[1].reshape(-1), *maps_args, layout.scale,
@@ -707,24 +757,22 @@ class Renderer:
         cached = self._stacks.get(key)
         if cached is not None:
             return cached
-        pieces, n_sampled = _pack_pieces(np.array(boxes, np.int64), layout.reads_atlas,
-                                          layout.cuts)
+        box_array = np.array(boxes, np.int64)
+        pieces, (s_rows, s_cols, s_widths, s_offsets), tex_rows = _pack_pieces(
+            box_array, layout.reads_atlas, layout.cuts, _PACK)
         rows, cols, widths, out_offsets, tex_offsets = pieces
-        sampled = tex_offsets >= 0
-        tex_rows = -(-n_sampled // _PACK)
-        s_offsets = tex_offsets[sampled]
-        tex_offsets[~sampled] = tex_rows * _PACK  # ceiling pieces read the zero tail
-        window_offsets = np.cumsum([0] + [ww * wh for _, _, ww, wh in boxes[:-1]])
-        s_rows, s_cols, s_widths = rows[sampled], cols[sampled], widths[sampled]
+        window_offsets = [0]
+        for _, _, ww, wh in boxes[:-1]:
+            window_offsets.append(window_offsets[-1] + ww * wh)
         stack = _Stack(rows=rows, cols=cols, widths=widths, out_offsets=out_offsets,
                        tex_offsets=tex_offsets, s_rows=s_rows, s_cols=s_cols,
                        s_widths=s_widths, s_offsets=s_offsets, tex_rows=tex_rows,
                        zero_len=max(ww for _, _, ww, _ in boxes),
                        out_len=int(out_offsets[-1] + widths[-1]),
-                       window_offsets=window_offsets.tolist(),
-                       level_bounds=_level_bounds(s_rows, s_cols, s_widths, layout.coord_a,
-                                                  layout.coord_b, layout.level, layout.flags,
-                                                  layout.levels, FOOTPRINT_BLOCK_PX))
+                       window_offsets=window_offsets,
+                       level_bounds=_view_bounds(box_array, layout.block_start,
+                                                 layout.block_bounds, FOOTPRINT_BLOCK_PX,
+                                                 layout.block_cols))
         if len(self._stacks) >= 32:
             self._stacks.pop(next(iter(self._stacks)))
         self._stacks[key] = stack

@@ -156,29 +156,35 @@ def _atlas_layout(shape0: tuple[int, int], wall_shape: tuple[int, int]
 
 @njit(cache=True)
 def _mark_needed(bounds: np.ndarray, affines: np.ndarray, size0_x: float, size0_y: float,
-                 sizes: np.ndarray, tile: np.ndarray, grids: np.ndarray, offsets: np.ndarray,
-                 filled: np.ndarray, need: np.ndarray) -> int:
+                 sizes: np.ndarray, tile_shift: np.ndarray, grids: np.ndarray,
+                 offsets: np.ndarray, filled: np.ndarray, need: np.ndarray) -> int:
     """Mark in ``need`` the unfilled tiles that bilinear taps of a view may read (see
     ``Scene.prepare``); returns how many. Conservative: per box, the level-0 texel box of
-    its corners under every pose, clamped like the renderer's maps, then two texels more
-    at its level."""
+    its image under every pose (interval arithmetic: each term's extremes), clamped like
+    the renderer's maps, then two texels more at its level. Runs every frame of a lazy
+    scene, so it reads only scalars (no row views) and divides by shifts (tiles of
+    ``1 << tile_shift`` texels)."""
     count = 0
     for n in range(bounds.shape[0]):
         lv = int(bounds[n, 0])
+        gx0, gx1, gy0, gy1 = bounds[n, 1], bounds[n, 2], bounds[n, 3], bounds[n, 4]
         x_lo = math.inf
         x_hi = -math.inf
         y_lo = math.inf
         y_hi = -math.inf
         for k in range(affines.shape[0]):
-            a = affines[k]
-            for gx in (bounds[n, 1], bounds[n, 2]):
-                for gy in (bounds[n, 3], bounds[n, 4]):
-                    x = min(max(a[0] * gx + a[1] * gy + a[2], -2.0), size0_x + 1.0)
-                    y = min(max(a[3] * gx + a[4] * gy + a[5], -2.0), size0_y + 1.0)
-                    x_lo = min(x_lo, x)
-                    x_hi = max(x_hi, x)
-                    y_lo = min(y_lo, y)
-                    y_hi = max(y_hi, y)
+            ax0, ay0 = affines[k, 0] * gx0, affines[k, 3] * gx0
+            ax1, ay1 = affines[k, 0] * gx1, affines[k, 3] * gx1
+            bx0, by0 = affines[k, 1] * gy0, affines[k, 4] * gy0
+            bx1, by1 = affines[k, 1] * gy1, affines[k, 4] * gy1
+            x_lo = min(x_lo, min(ax0, ax1) + min(bx0, bx1) + affines[k, 2])
+            x_hi = max(x_hi, max(ax0, ax1) + max(bx0, bx1) + affines[k, 2])
+            y_lo = min(y_lo, min(ay0, ay1) + min(by0, by1) + affines[k, 5])
+            y_hi = max(y_hi, max(ay0, ay1) + max(by0, by1) + affines[k, 5])
+        x_lo = min(max(x_lo, -2.0), size0_x + 1.0)
+        x_hi = min(max(x_hi, -2.0), size0_x + 1.0)
+        y_lo = min(max(y_lo, -2.0), size0_y + 1.0)
+        y_hi = min(max(y_hi, -2.0), size0_y + 1.0)
         scale = 0.5**lv
         bias = 0.5 * scale - 0.5
         rows, cols = sizes[lv, 0], sizes[lv, 1]
@@ -186,12 +192,12 @@ def _mark_needed(bounds: np.ndarray, affines: np.ndarray, size0_x: float, size0_
         c_hi = min(cols - 1, int(math.floor(x_hi * scale + bias)) + 3)
         r_lo = max(0, int(math.floor(y_lo * scale + bias)) - 2)
         r_hi = min(rows - 1, int(math.floor(y_hi * scale + bias)) + 3)
-        t = tile[lv]
-        for tr in range(r_lo // t, r_hi // t + 1):
-            for tc in range(c_lo // t, c_hi // t + 1):
-                i = offsets[lv] + tr * grids[lv, 1] + tc
-                if not filled[i] and not need[i]:
-                    need[i] = 1
+        sh = tile_shift[lv]
+        for tr in range(r_lo >> sh, (r_hi >> sh) + 1):
+            row = offsets[lv] + tr * grids[lv, 1]
+            for tc in range(c_lo >> sh, (c_hi >> sh) + 1):
+                if not filled[row + tc] and not need[row + tc]:
+                    need[row + tc] = 1
                     count += 1
     return count
 
@@ -269,9 +275,12 @@ class MipTiles:
         self._worn = worn  # coarse worn share (``_wear_noise``); resized on first use
         self._remaining: np.ndarray | None = None
         t0 = marking.tile_px
+        if t0 & (t0 - 1):
+            raise ValueError(f"a lazy scene needs tiles of 2^k px, got {t0}")
         self.sizes = np.array(sizes, np.int64)
         self.origins = np.array(origins, np.int64)
         self.tile = np.array([max(1, t0 >> lv) for lv in range(len(sizes))], np.int64)
+        self.tile_shift = np.array([int(t).bit_length() - 1 for t in self.tile], np.int64)
         self.grids = -(-self.sizes // self.tile[:, None])
         counts = self.grids[:, 0] * self.grids[:, 1]
         self.offsets = np.concatenate(([0], np.cumsum(counts)[:-1])).astype(np.int64)
@@ -282,8 +291,8 @@ class MipTiles:
     def ensure(self, bounds: np.ndarray, affines: np.ndarray) -> None:
         """Fill what a view reads (``Scene.prepare``)."""
         rows, cols = self.marking.shape
-        if _mark_needed(bounds, affines, float(cols), float(rows), self.sizes, self.tile,
-                        self.grids, self.offsets, self.filled, self.need):
+        if _mark_needed(bounds, affines, float(cols), float(rows), self.sizes,
+                        self.tile_shift, self.grids, self.offsets, self.filled, self.need):
             self._fill()
 
     def fill_all(self) -> None:

@@ -176,3 +176,52 @@ def test_scenes_of_one_track_share_its_marking_map() -> None:
     c = build_scene(generated(12), Effects())
     assert c.tiles.marking is not a.tiles.marking
     assert isinstance(c.tiles.marking, TiledMarkingMap)
+
+
+def test_a_view_s_boxes_cover_every_ground_pixel_it_reads(renderer: Renderer) -> None:
+    """The per-block table is made once per pixel layout; a view takes the rows of the
+    blocks its windows touch, and every ground pixel of the windows lies inside a box of
+    its own mip level from its own block."""
+    from tfalda_sim.rendering.renderer import FOOTPRINT_BLOCK_PX, _view_bounds
+
+    scene = build_scene(generated(3), Effects())
+    layout = renderer._layout(scene)
+    level = np.clip(np.rint(renderer.geometry.log2_fp - np.log2(scene.resolution_m)), 0,
+                    scene.levels - 1).astype(np.int64)
+    rng = np.random.default_rng(0)
+    block = FOOTPRINT_BLOCK_PX
+    for _ in range(20):
+        w, h = int(rng.integers(1, 200)), int(rng.integers(1, 120))
+        x0, y0 = int(rng.integers(0, 752 - w + 1)), int(rng.integers(0, 480 - h + 1))
+        bounds = _view_bounds(np.array([[x0, y0, w, h]], np.int64), layout.block_start,
+                              layout.block_bounds, block, layout.block_cols)
+        blocks = {(r // block, c // block) for r in range(y0, y0 + h)
+                  for c in range(x0, x0 + w)}
+        rows = sum(int(layout.block_start[i * layout.block_cols + j + 1]
+                       - layout.block_start[i * layout.block_cols + j]) for i, j in blocks)
+        assert len(bounds) == rows  # the touched blocks' rows, no more
+        for r in range(y0, y0 + h, 3):
+            for c in range(x0, x0 + w, 3):
+                if not layout.flags[r, c] & 1:
+                    continue
+                gx, gy = layout.coord_a[r, c], layout.coord_b[r, c]
+                inside = ((bounds[:, 0] == level[r, c]) & (bounds[:, 1] <= gx)
+                          & (gx <= bounds[:, 2]) & (bounds[:, 3] <= gy) & (gy <= bounds[:, 4]))
+                assert inside.any(), (r, c)
+
+
+def test_moving_windows_cost_no_pass_over_the_pixels(renderer: Renderer, monkeypatch) -> None:
+    """New windows every frame (the env's ROIs) reuse the per-block table: it is built
+    with the pixel layout, never per window list."""
+    from tfalda_sim.rendering import renderer as module
+
+    calls = []
+    real = module._block_bounds
+    monkeypatch.setattr(module, "_block_bounds", lambda *a: calls.append(1) or real(*a))
+    r = Renderer()
+    track = replace(generated(9), name="moving windows")
+    scene = build_scene(track, Effects())
+    pose = _poses(track, 1, 0)[0]
+    for dx in range(0, 40, 4):
+        r.render_windows(scene, pose, [(x + dx, y, w, h) for x, y, w, h in ROIS])
+    assert len(calls) == 1
