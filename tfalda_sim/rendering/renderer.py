@@ -19,6 +19,7 @@ frame bit for bit — perception renders only its ROIs.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -308,6 +309,9 @@ def _pack_pieces(boxes: np.ndarray, reads: np.ndarray, cuts: np.ndarray, pack: i
     return out, s_out, tex_rows
 
 
+_layout_ids = itertools.count()
+"""Owner ids of atlas layouts (``_Layout.uid``)."""
+
 FOOTPRINT_BLOCK_PX: int = 16
 """Edge of the image blocks [px] whose ground hits are boxed separately for a lazy scene:
 boxes of small blocks hug the frame's footprint (one box per window would also cover the
@@ -316,21 +320,29 @@ ground between the ROIs)."""
 
 @njit(cache=True)
 def _block_bounds(coord_a: np.ndarray, coord_b: np.ndarray, level: np.ndarray,
-                  flags: np.ndarray, levels: int, block: int
-                  ) -> tuple[np.ndarray, np.ndarray]:
+                  flags: np.ndarray, wall_row: np.ndarray, levels: int, block: int
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per image block of ``block`` × ``block`` px and mip level, the car-frame box of
     the ground hits of all its pixels that read that level — constants of the pixel
     layout, computed once. Returns ``(start, bounds)``: the rows of block ``b`` (numbered
     row-major) are ``bounds[start[b]:start[b + 1]]``, each ``(level, x_min, x_max, y_min,
-    y_max)`` [m]."""
+    y_max)`` [m]. Also per block ``(min, max)`` of its wall pixels' rows in the wall
+    texture [texels] (inf, −inf: none)."""
     h, w = flags.shape
     nbr = (h + block - 1) // block
     nbc = (w + block - 1) // block
     box = np.empty((nbr, nbc, levels, 4))
     box[..., 0] = box[..., 2] = math.inf
     box[..., 1] = box[..., 3] = -math.inf
+    walls = np.empty((nbr * nbc, 2))
+    walls[:, 0] = math.inf
+    walls[:, 1] = -math.inf
     for r in range(h):
         for c in range(w):
+            if not flags[r, c] & 5:  # a wall
+                b = (r // block) * nbc + c // block
+                walls[b, 0] = min(walls[b, 0], wall_row[r, c])
+                walls[b, 1] = max(walls[b, 1], wall_row[r, c])
             if not flags[r, c] & 1:
                 continue
             b = box[r // block, c // block, level[r, c]]
@@ -356,21 +368,27 @@ def _block_bounds(coord_a: np.ndarray, coord_b: np.ndarray, level: np.ndarray,
                     bounds[k, 0] = lv
                     bounds[k, 1:] = box[i, j, lv]
                     k += 1
-    return start, bounds
+    return start, bounds, walls
 
 
 @njit(cache=True)
-def _view_bounds(boxes: np.ndarray, start: np.ndarray, bounds: np.ndarray, block: int,
-                 n_block_cols: int) -> np.ndarray:
+def _view_bounds(boxes: np.ndarray, start: np.ndarray, bounds: np.ndarray,
+                 walls: np.ndarray, block: int, n_block_cols: int
+                 ) -> tuple[np.ndarray, float, float]:
     """The rows of ``_block_bounds`` of every block that the windows ``boxes`` ``(k, 4)``
-    (x, y, w, h) [px] touch: what a lazy scene must have filled before the windows are
-    sampled (whole blocks: a few pixels more than the windows, never fewer)."""
+    (x, y, w, h) [px] touch, and the range of wall texture rows their wall pixels read
+    (inf, −inf: none): what a lazy scene must have filled before the windows are sampled
+    (whole blocks: a few pixels more than the windows, never fewer)."""
+    wall_lo = math.inf
+    wall_hi = -math.inf
     n = 0
     for k in range(boxes.shape[0]):
         x0, y0, w, h = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3]
         for i in range(y0 // block, (y0 + h - 1) // block + 1):
             for j in range(x0 // block, (x0 + w - 1) // block + 1):
                 n += start[i * n_block_cols + j + 1] - start[i * n_block_cols + j]
+                wall_lo = min(wall_lo, walls[i * n_block_cols + j, 0])
+                wall_hi = max(wall_hi, walls[i * n_block_cols + j, 1])
     out = np.empty((n, 5))
     t = 0
     for k in range(boxes.shape[0]):
@@ -381,7 +399,7 @@ def _view_bounds(boxes: np.ndarray, start: np.ndarray, bounds: np.ndarray, block
                     for q in range(5):  # element-wise: row slices cost more here
                         out[t, q] = bounds[m, q]
                     t += 1
-    return out
+    return out, wall_lo, wall_hi
 
 
 _PACK = 1024
@@ -410,11 +428,19 @@ class _Stack:
     out_len: int
     window_offsets: list[int]
     level_bounds: np.ndarray  # (n, 5): level and car-frame box of the ground hits per block
+    wall_rows: tuple[float, float]  # range of wall texture rows read (inf, −inf: none)
+    box_array: np.ndarray  # (k, 4) int64: the windows
 
 
 @dataclass(frozen=True)
 class _Layout:
-    """Per-pixel constants for one atlas layout and hall (cached by the renderer)."""
+    """Per-pixel constants for one atlas layout and hall (cached by the renderer).
+
+    ``coord_b``, ``bias_x`` and ``bias_y`` are the pixel layout's shared buffers: they
+    hold this atlas's values only in the image blocks whose ``block_owner`` is ``uid``,
+    and ``render_windows`` fills the blocks it reads first (``_own_blocks``). A new track
+    moves the atlas's levels, and a view reads a sixth of the image: filling all of it
+    cost more than the rest of a reset's render."""
 
     coord_a: np.ndarray  # ground: car-frame x [m]; walls: wall column at yaw 0 [texels]
     coord_b: np.ndarray  # ground: car-frame y [m]; walls: atlas row [texels]
@@ -426,20 +452,24 @@ class _Layout:
     cuts: np.ndarray  # per row: columns where reads_atlas switches, padded with the width
     block_start: np.ndarray  # ``_block_bounds`` of the pixel layout
     block_bounds: np.ndarray
+    block_walls: np.ndarray
     block_cols: int  # image blocks per row
     pixel_key: tuple  # key of its ``_PixelLayout``: what window packings depend on
+    pixel: _PixelLayout
+    table: np.ndarray  # (2, levels + 2) float32: atlas offsets (x, y) per pixel code
+    wall_y: float  # atlas row of the wall texture's row 0
+    uid: int  # owner id of the blocks filled for this atlas
 
 
 @dataclass(frozen=True)
 class _PixelLayout:
     """The part of a ``_Layout`` that does not depend on where the atlas puts its levels
-    and walls (cached per resolution, level count, hall and wall height): building it
-    is most of a layout's cost, and a new track moves its atlas's levels."""
+    and walls (cached per resolution, level count, hall and wall height), and the
+    buffers its layouts fill block by block."""
 
     coord_a: np.ndarray
-    coord_b: np.ndarray  # wall pixels still without the wall's atlas row
-    wall_index: np.ndarray  # flat indices of the wall pixels
-    wall_row: np.ndarray  # their row in the wall texture [texels] (float64)
+    coord_b: np.ndarray  # ground: car-frame y [m]; elsewhere the padding coordinate
+    wall_row: np.ndarray  # walls: row in the wall texture [texels] (float64); else 0
     code: np.ndarray  # uint8: level on the ground, levels on the walls, levels + 1 ceiling
     scale: np.ndarray
     flags: np.ndarray
@@ -447,24 +477,39 @@ class _PixelLayout:
     cuts: np.ndarray
     block_start: np.ndarray
     block_bounds: np.ndarray
+    block_walls: np.ndarray
+    atlas_coord_b: np.ndarray  # the buffers of ``_Layout.coord_b``, ``bias_x``, ``bias_y``
+    bias_x: np.ndarray
+    bias_y: np.ndarray
+    block_owner: np.ndarray  # int64 per image block: uid of the layout filled there; −1
 
 
 @njit(cache=True)
-def _place_walls(coord_b: np.ndarray, index: np.ndarray, wall_row: np.ndarray,
-                 wall_y: float) -> None:
-    """The wall pixels' atlas rows: texture row + the wall's atlas row, summed in float64
-    and rounded to float32 once (as the layout always did)."""
-    for k in range(len(index)):
-        coord_b[index[k]] = np.float32(wall_row[k] + wall_y)
-
-
-@njit(cache=True)
-def _lookup(bias_x: np.ndarray, bias_y: np.ndarray, code: np.ndarray, table: np.ndarray
-            ) -> None:
-    """Per pixel the atlas offsets of its code (mip level, wall or ceiling)."""
-    for k in range(len(code)):
-        bias_x[k] = table[0, code[k]]
-        bias_y[k] = table[1, code[k]]
+def _own_blocks(boxes: np.ndarray, block: int, n_block_cols: int, owner: np.ndarray,
+                uid: int, code: np.ndarray, table: np.ndarray, ground_b: np.ndarray,
+                wall_row: np.ndarray, wall_code: int, wall_y: float, coord_b: np.ndarray,
+                bias_x: np.ndarray, bias_y: np.ndarray) -> None:
+    """Fill the image blocks under the windows ``boxes`` with layout ``uid``'s values
+    unless they hold them: per pixel the atlas offsets of its code (mip level, wall or
+    ceiling) from ``table``, and on the walls the atlas row, texture row + the wall's
+    atlas row summed in float64 and rounded to float32 once (as the layout always did)."""
+    h, w = code.shape
+    for k in range(boxes.shape[0]):
+        x0, y0, bw, bh = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3]
+        for i in range(y0 // block, (y0 + bh - 1) // block + 1):
+            for j in range(x0 // block, (x0 + bw - 1) // block + 1):
+                if owner[i * n_block_cols + j] == uid:
+                    continue
+                owner[i * n_block_cols + j] = uid
+                for r in range(i * block, min((i + 1) * block, h)):
+                    for c in range(j * block, min((j + 1) * block, w)):
+                        cd = code[r, c]
+                        bias_x[r, c] = table[0, cd]
+                        bias_y[r, c] = table[1, cd]
+                        if cd == wall_code:
+                            coord_b[r, c] = np.float32(wall_row[r, c] + wall_y)
+                        else:
+                            coord_b[r, c] = ground_b[r, c]
 
 
 def _switch_columns(mask: np.ndarray) -> np.ndarray:
@@ -553,13 +598,14 @@ class Renderer:
         wall_row = np.clip(z / WALL_TEXEL_M, 0.0, scene.wall_size[1] - 1.0)
         f32 = np.float32
         code = np.where(is_ground, level, np.where(ceiling, levels + 1, levels))
-        block_start, block_bounds = _block_bounds(g.gx, g.gy, level, flags, levels,
-                                                  FOOTPRINT_BLOCK_PX)
+        wall_row = np.where(wall, wall_row, 0.0)
+        block_start, block_bounds, block_walls = _block_bounds(
+            g.gx, g.gy, level, flags, wall_row, levels, FOOTPRINT_BLOCK_PX)
+        shape = flags.shape
         return _PixelLayout(
             coord_a=np.where(is_ground, g.gx, wall_col).astype(f32),
             coord_b=np.where(is_ground, g.gy, _PAD).astype(f32),
-            wall_index=np.flatnonzero(wall),
-            wall_row=wall_row[wall],
+            wall_row=wall_row,
             code=code.astype(np.uint8),
             scale=np.where(is_ground, level_scale, 0.0).astype(f32),
             flags=flags,
@@ -567,11 +613,17 @@ class Renderer:
             cuts=_switch_columns(flags != 4),
             block_start=block_start,
             block_bounds=block_bounds,
+            block_walls=block_walls,
+            atlas_coord_b=np.empty(shape, f32),
+            bias_x=np.empty(shape, f32),
+            bias_y=np.empty(shape, f32),
+            block_owner=np.full(len(block_start) - 1, -1, np.int64),
         )
 
     def _build_layout(self, scene: Scene) -> _Layout:
         """The scene's layout: the cached pixel layout plus where this atlas puts its
-        levels and walls (the same float64 sums as ever, rounded to float32 once)."""
+        levels and walls (the same float64 sums as ever, rounded to float32 once), filled
+        into the pixel layout's buffers where a view needs them (``_own_blocks``)."""
         base, pixel_key = self._pixel_layout(scene)
         levels = scene.levels
         origin = scene.level_origin
@@ -582,19 +634,14 @@ class Renderer:
             bias[1, lv] = 0.5 * level_scale - 0.5 + origin[lv, 1]
         bias[0, levels] = scene.wall_origin[0]
         bias[0, levels + 1] = _PAD
-        bias32 = bias.astype(np.float32)
-        coord_b = base.coord_b.copy()
-        _place_walls(coord_b.reshape(-1), base.wall_index, base.wall_row,
-                     float(scene.wall_origin[1]))
-        bias_x = np.empty_like(base.coord_a)
-        bias_y = np.empty_like(base.coord_a)
-        _lookup(bias_x.reshape(-1), bias_y.reshape(-1), base.code.reshape(-1), bias32)
         return _Layout(
-            coord_a=base.coord_a, coord_b=coord_b, scale=base.scale, bias_x=bias_x,
-            bias_y=bias_y, flags=base.flags, reads_atlas=base.reads_atlas, cuts=base.cuts,
-            block_start=base.block_start, block_bounds=base.block_bounds,
-            block_cols=-(-base.flags.shape[1] // FOOTPRINT_BLOCK_PX),
-            pixel_key=pixel_key,
+            coord_a=base.coord_a, coord_b=base.atlas_coord_b, scale=base.scale,
+            bias_x=base.bias_x, bias_y=base.bias_y, flags=base.flags,
+            reads_atlas=base.reads_atlas, cuts=base.cuts, block_start=base.block_start,
+            block_bounds=base.block_bounds, block_walls=base.block_walls,
+            block_cols=-(-base.flags.shape[1] // FOOTPRINT_BLOCK_PX), pixel_key=pixel_key,
+            pixel=base, table=bias.astype(np.float32), wall_y=float(scene.wall_origin[1]),
+            uid=next(_layout_ids),
         )
 
     def _buffers(self, st: _Stack, with_light: bool
@@ -676,6 +723,11 @@ class Renderer:
         layout, box_faces, _ = self._scene_data(scene)
         gain, sheen, params = self._maps_for(fx)
         st = self._stack(boxes, layout)
+        px = layout.pixel
+        _own_blocks(st.box_array, FOOTPRINT_BLOCK_PX, layout.block_cols, px.block_owner,
+                    layout.uid, px.code, layout.table, px.coord_b, px.wall_row,
+                    len(layout.table[0]) - 2, layout.wall_y, layout.coord_b, layout.bias_x,
+                    layout.bias_y)
         blur_m = speed_m_s * fx.motion_blur_s
         shifts = np.linspace(0.0, blur_m, MOTION_BLUR_SAMPLES) if blur_m > 0 else (0.0,)
         blur = len(shifts) > 1
@@ -691,7 +743,7 @@ class Renderer:
             # A lazy scene fills what this view reads: the poses of the first and the last
             # blur sample bound the boxes of all of them (one straight shift).
             scene.prepare(st.level_bounds, np.stack((affines[0], affines[-1])) if blur
-                          else affines[0][None])
+                          else affines[0][None], st.wall_rows)
         wall_shift = (yaw % (2 * math.pi)) * (scene.hall.distance_m / WALL_TEXEL_M)
         size_x, size_y = float(scene.level0_size[0]), float(scene.level0_size[1])
         for k, affine in enumerate(affines):
@@ -761,6 +813,9 @@ class Renderer:
         pieces, (s_rows, s_cols, s_widths, s_offsets), tex_rows = _pack_pieces(
             box_array, layout.reads_atlas, layout.cuts, _PACK)
         rows, cols, widths, out_offsets, tex_offsets = pieces
+        level_bounds, wall_lo, wall_hi = _view_bounds(
+            box_array, layout.block_start, layout.block_bounds, layout.block_walls,
+            FOOTPRINT_BLOCK_PX, layout.block_cols)
         window_offsets = [0]
         for _, _, ww, wh in boxes[:-1]:
             window_offsets.append(window_offsets[-1] + ww * wh)
@@ -769,10 +824,8 @@ class Renderer:
                        s_widths=s_widths, s_offsets=s_offsets, tex_rows=tex_rows,
                        zero_len=max(ww for _, _, ww, _ in boxes),
                        out_len=int(out_offsets[-1] + widths[-1]),
-                       window_offsets=window_offsets,
-                       level_bounds=_view_bounds(box_array, layout.block_start,
-                                                 layout.block_bounds, FOOTPRINT_BLOCK_PX,
-                                                 layout.block_cols))
+                       window_offsets=window_offsets, level_bounds=level_bounds,
+                       wall_rows=(wall_lo, wall_hi), box_array=box_array)
         if len(self._stacks) >= 32:
             self._stacks.pop(next(iter(self._stacks)))
         self._stacks[key] = stack

@@ -76,13 +76,16 @@ class Scene:
     def levels(self) -> int:
         return len(self.level_origin)
 
-    def prepare(self, bounds: np.ndarray, affines: np.ndarray) -> None:
+    def prepare(self, bounds: np.ndarray, affines: np.ndarray,
+                wall_rows: tuple[float, float] = (-math.inf, math.inf)) -> None:
         """Fill the atlas under a view before it is sampled (a no-op once all is filled):
         ``bounds`` ``(n, 5)`` rows ``(level, x_min, x_max, y_min, y_max)``, car-frame boxes
         [m] of the ground hits read at a mip level; ``affines`` ``(k, 6)`` the car poses'
-        maps car frame → level-0 texels (see ``Renderer``)."""
+        maps car frame → level-0 texels (see ``Renderer``); ``wall_rows`` the range of
+        wall texture rows [texels] read (all by default; inf, −inf: none)."""
         if self.tiles is not None and not self.tiles.complete:
             self.tiles.ensure(bounds, affines)
+            self.tiles.ensure_walls(*wall_rows)
 
     def fill_all(self) -> None:
         """Fill every tile: the atlas becomes the eager scene's."""
@@ -266,12 +269,18 @@ class MipTiles:
     """The marking levels of a lazy scene's atlas, filled tile by tile as views need
     them: a tile of level 0 is painted by the marking map, a tile of level L is the box
     average of the tiles of level L − 1 under it. Filled tiles hold exactly the eager
-    atlas's texels; the rest of the atlas is untouched zeros (no memory)."""
+    atlas's texels; the rest of the atlas is untouched zeros (no memory). The wall
+    texture is copied in row by row as views read it (the ROIs see no wall: every atlas
+    row written costs a page fault)."""
 
     def __init__(self, marking: TiledMarkingMap, atlas: np.ndarray, sizes: list[tuple[int, int]],
-                 origins: list[tuple[int, int]], worn: np.ndarray | None) -> None:
+                 origins: list[tuple[int, int]], worn: np.ndarray | None,
+                 wall: np.ndarray, wall_origin: tuple[int, int]) -> None:
         self.marking = marking
         self.atlas = atlas
+        self.wall = wall
+        self.wall_origin = wall_origin
+        self.wall_filled = np.zeros(wall.shape[0], bool)
         self._worn = worn  # coarse worn share (``_wear_noise``); resized on first use
         self._remaining: np.ndarray | None = None
         t0 = marking.tile_px
@@ -287,6 +296,7 @@ class MipTiles:
         self.filled = np.zeros(int(counts.sum()), np.uint8)
         self.need = np.zeros_like(self.filled)
         self.complete = False
+        self._tiles_complete = False
 
     def ensure(self, bounds: np.ndarray, affines: np.ndarray) -> None:
         """Fill what a view reads (``Scene.prepare``)."""
@@ -295,9 +305,26 @@ class MipTiles:
                         self.tile_shift, self.grids, self.offsets, self.filled, self.need):
             self._fill()
 
+    def ensure_walls(self, lo: float, hi: float) -> None:
+        """Copy in the wall texture rows that bilinear taps of rows ``lo … hi`` [texels]
+        read (a row more on each side for rounding)."""
+        if not lo <= hi:
+            return
+        rows = self.wall.shape[0]
+        r0 = min(max(int(math.floor(lo)) - 1, 0), rows)
+        r1 = min(max(int(math.floor(hi)) + 3, 0), rows)
+        if self.wall_filled[r0:r1].all():
+            return
+        wall, (wx, wy) = self.wall, self.wall_origin
+        self.atlas[wy + r0:wy + r1, wx:wx + wall.shape[1]] = wall[r0:r1]
+        self.atlas[wy + r0:wy + r1, wx + wall.shape[1]] = wall[r0:r1, 0]  # wraps (_atlas)
+        self.wall_filled[r0:r1] = True
+        self.complete = self._tiles_complete and bool(self.wall_filled.all())
+
     def fill_all(self) -> None:
         self.need[:] = self.filled == 0
         self._fill()
+        self.ensure_walls(0.0, float(self.wall.shape[0]))
 
     def _fill(self) -> None:
         _propagate(self.need, self.filled, self.sizes, self.tile, self.grids, self.offsets)
@@ -314,7 +341,8 @@ class MipTiles:
                    self.offsets)
         self.filled |= self.need
         self.need[:] = 0
-        self.complete = bool(self.filled.all())
+        self._tiles_complete = bool(self.filled.all())
+        self.complete = self._tiles_complete and bool(self.wall_filled.all())
 
 
 def _blobs(rng: np.random.Generator, shape: tuple[int, int], count: int,
@@ -436,12 +464,9 @@ def build_scene(track: Track, effects: Effects | None = None,
         worn = _wear_noise(rng, shape, fx.wear) if fx.wear > 0 else None
         wall = _cached_wall_texture(rng, hall)
         (height, width), sizes, level_xy, wall_origin = _atlas_layout(shape, wall.shape)
-        atlas = untouched_zeros((height, width))  # unfilled tiles cost nothing
-        wx, wy = wall_origin
-        atlas[wy:wy + wall.shape[0], wx:wx + wall.shape[1]] = wall
-        atlas[wy:wy + wall.shape[0], wx + wall.shape[1]] = wall[:, 0]  # wraps (see _atlas)
+        atlas = untouched_zeros((height, width))  # unfilled tiles and walls cost nothing
         origins = np.array(level_xy, np.float32)
-        tiles = MipTiles(marking, atlas, sizes, level_xy, worn)
+        tiles = MipTiles(marking, atlas, sizes, level_xy, worn, wall, wall_origin)
     else:
         m = marking_map if marking_map is not None else rasterize(track)
         shape, resolution_m, origin_m = m.shape, m.resolution_m, m.origin_m

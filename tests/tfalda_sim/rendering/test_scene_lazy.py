@@ -193,8 +193,9 @@ def test_a_view_s_boxes_cover_every_ground_pixel_it_reads(renderer: Renderer) ->
     for _ in range(20):
         w, h = int(rng.integers(1, 200)), int(rng.integers(1, 120))
         x0, y0 = int(rng.integers(0, 752 - w + 1)), int(rng.integers(0, 480 - h + 1))
-        bounds = _view_bounds(np.array([[x0, y0, w, h]], np.int64), layout.block_start,
-                              layout.block_bounds, block, layout.block_cols)
+        bounds, _, _ = _view_bounds(np.array([[x0, y0, w, h]], np.int64),
+                                    layout.block_start, layout.block_bounds,
+                                    layout.block_walls, block, layout.block_cols)
         blocks = {(r // block, c // block) for r in range(y0, y0 + h)
                   for c in range(x0, x0 + w)}
         rows = sum(int(layout.block_start[i * layout.block_cols + j + 1]
@@ -204,7 +205,7 @@ def test_a_view_s_boxes_cover_every_ground_pixel_it_reads(renderer: Renderer) ->
             for c in range(x0, x0 + w, 3):
                 if not layout.flags[r, c] & 1:
                     continue
-                gx, gy = layout.coord_a[r, c], layout.coord_b[r, c]
+                gx, gy = layout.coord_a[r, c], layout.pixel.coord_b[r, c]
                 inside = ((bounds[:, 0] == level[r, c]) & (bounds[:, 1] <= gx)
                           & (gx <= bounds[:, 2]) & (bounds[:, 3] <= gy) & (gy <= bounds[:, 4]))
                 assert inside.any(), (r, c)
