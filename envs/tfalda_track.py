@@ -307,8 +307,10 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
                                              "an tfalda_sim.envs.RewardWeights") or RewardWeights()
         self.default_faults = check_faults("faults", faults)
         self.track_spec = track
-        if track is not None:
-            resolve_track(track, self.obstacles)  # fail early on a bad track
+        # Resolved once (fails early on a bad track): a reset on the default track must
+        # not generate it again.
+        self._default_track = (resolve_track(track, self.obstacles) if track is not None
+                               else None)
 
         self.camera = resolve_camera(camera)
         self.detector_config = self.detector_config.on_camera(self.camera)
@@ -409,8 +411,12 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
                              f"known: {', '.join(RESET_OPTIONS)}")
         spec = given.get("track", self.track_spec)
         start = given.get("start")
+        if "track" not in given:
+            track = self._default_track
+        else:
+            track = None if spec is None else resolve_track(spec, self.obstacles)
         return _ResetOptions(
-            track=None if spec is None else resolve_track(spec, self.obstacles),
+            track=track,
             spec=spec,
             start=None if start is None else check_triple(
                 "start", start, "(s_m, lateral_m, heading_error_rad)"),

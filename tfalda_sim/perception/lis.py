@@ -17,6 +17,7 @@ After the rows: a fault counter above the limit asks for a reset (section 2.4).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,10 +31,17 @@ Rows = list[tuple[LaneSegment, LaneSegment]]
 def width_limits(config: LisConfig, y_px: float) -> tuple[float, float]:
     """(min, max) lane width [px] at image row ``y_px``: table 2.3's values at its four
     rows, linear in between (for layouts with more than two rows) and held beyond."""
-    rows = config.width_limit_rows_px
-    lo = np.array([a for a, _ in config.width_limits_px])
-    hi = np.array([b for _, b in config.width_limits_px])
+    rows, lo, hi = _limit_table(config)
     return float(np.interp(y_px, rows, lo)), float(np.interp(y_px, rows, hi))
+
+
+@functools.lru_cache(maxsize=16)
+def _limit_table(config: LisConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``width_limits``' rows, minima and maxima as arrays, made once per configuration
+    (four times a frame they cost more than the interpolation)."""
+    return (np.array(config.width_limit_rows_px, np.float64),
+            np.array([a for a, _ in config.width_limits_px], np.float64),
+            np.array([b for _, b in config.width_limits_px], np.float64))
 
 
 def tolerance_scale(config: LisConfig, y_px: float) -> float:
