@@ -99,6 +99,7 @@ def test_a_roi_view_fills_a_small_part_of_the_map(renderer: Renderer) -> None:
     renderer.render_windows(scene, _poses(track, 1, 0)[0], ROIS)
     filled = scene.tiles.marking.filled
     assert 0 < filled.mean() < 0.15
+    assert not scene.tiles.wall_filled.any()  # the ROIs see no wall: none copied in
 
 
 def test_lazy_scene_draws_the_same_random_numbers() -> None:
@@ -226,3 +227,22 @@ def test_moving_windows_cost_no_pass_over_the_pixels(renderer: Renderer, monkeyp
     for dx in range(0, 40, 4):
         r.render_windows(scene, pose, [(x + dx, y, w, h) for x, y, w, h in ROIS])
     assert len(calls) == 1
+
+
+def test_alternating_atlases_keep_their_own_offsets() -> None:
+    """Scenes of tracks of other sizes (other atlas layouts) rendered in turn by one
+    renderer, whose per-pixel atlas offsets are filled block by block per layout, give
+    the frames of a renderer that saw only that scene."""
+    shared = Renderer()
+    tracks = [generated(3), generated(7)]
+    scenes = [build_scene(t, Effects(), lazy=False) for t in tracks]
+    assert not np.array_equal(scenes[0].level_origin, scenes[1].level_origin)
+    poses = [_poses(t, 2, 0) for t in tracks]
+    for k in (0, 1, 0, 1):
+        pose = poses[k][0]
+        got = shared.render_windows(scenes[k], pose, ROIS, frame_seed=1)
+        alone = Renderer().render_windows(scenes[k], pose, ROIS, frame_seed=1)
+        for g, w in zip(got, alone, strict=True):
+            np.testing.assert_array_equal(g, w)
+        np.testing.assert_array_equal(shared.render(scenes[k], poses[k][1], frame_seed=2),
+                                      Renderer().render(scenes[k], poses[k][1], frame_seed=2))
