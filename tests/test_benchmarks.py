@@ -1,0 +1,39 @@
+"""The benchmark scripts run and report what BENCHMARKS.md quotes (no timing is asserted:
+speed is measured by the scripts, never by tests)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
+
+
+def run_json(script: str, *args: str) -> dict:
+    done = subprocess.run([sys.executable, str(BENCHMARKS / script), *args, "--json"],
+                          capture_output=True, text=True, timeout=600, check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout)
+
+
+def test_bench_env_reports_every_configuration_against_car_racing() -> None:
+    result = run_json("bench_env.py", "--steps", "40")
+    envs = result["envs"]
+    reference = envs["CarRacing-v3 (reference)"]
+    assert isinstance(reference, dict), reference  # Box2D is installed (dev extra)
+    for name, r in envs.items():
+        assert isinstance(r, dict), f"{name}: {r}"
+        assert r["steps_per_s"] > 0 and r["ratio_to_car_racing"] > 0
+    assert {"make_vec, 1 env, lanes, generated", "make_vec, 2 envs, lanes, generated",
+            "lanes, fixed track (oval)", "lanes, new generated track per reset"} <= set(envs)
+    assert set(result["ratios"]) == {"make_vec 2 envs / 1 env",
+                                     "generated / fixed track (lanes)"}
+
+
+def test_bench_candidates_finds_the_kernels_identical() -> None:
+    result = run_json("bench_candidates.py", "--rois", "24", "--repeat", "1")
+    assert result["identical_results"] is True
+    assert result["rois"] == 24
+    assert result["executed_additions_per_roi"] >= result["useful_additions_per_roi"] > 0
