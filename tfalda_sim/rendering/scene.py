@@ -311,6 +311,7 @@ class MipTiles:
         if not lo <= hi:
             return
         rows = self.wall.shape[0]
+        lo, hi = max(lo, -1.0), min(hi, float(rows))  # infinite bounds: every row
         r0 = min(max(int(math.floor(lo)) - 1, 0), rows)
         r1 = min(max(int(math.floor(hi)) + 3, 0), rows)
         if self.wall_filled[r0:r1].all():

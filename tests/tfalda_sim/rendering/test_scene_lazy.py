@@ -246,3 +246,13 @@ def test_alternating_atlases_keep_their_own_offsets() -> None:
             np.testing.assert_array_equal(g, w)
         np.testing.assert_array_equal(shared.render(scenes[k], poses[k][1], frame_seed=2),
                                       Renderer().render(scenes[k], poses[k][1], frame_seed=2))
+
+
+def test_prepare_without_wall_rows_copies_every_wall_row() -> None:
+    scene = build_scene(replace(generated(4), name="walls"), Effects())
+    scene.prepare(np.zeros((0, 5)), np.zeros((1, 6)))
+    assert scene.tiles.wall_filled.all()
+    eager = build_scene(generated(4), Effects(), lazy=False)
+    (wx, wy), (cols, rows) = eager.wall_origin, eager.wall_size
+    np.testing.assert_array_equal(scene.atlas[wy:wy + rows, wx:wx + cols + 1],
+                                  eager.atlas[wy:wy + rows, wx:wx + cols + 1])
