@@ -288,8 +288,15 @@ def _merge_infos(infos: list[dict[str, Any]]) -> dict[str, Any]:
     keys = list(infos[0]) if infos else []
     if any(list(info) != keys for info in infos[1:]):  # not ours (a wrapper's?): general path
         keys = list(dict.fromkeys(k for info in infos for k in info))
+    all_present = np.ones(n, dtype=np.bool_)
     for key in keys:
         values = [info.get(key, _MISSING) for info in infos]
+        kind = type(values[0])
+        if kind in (int, float, bool) and all(type(v) is kind for v in values):
+            # The common case in one call: every env has the key, a plain scalar.
+            merged[key] = np.array(values, dtype=kind)
+            merged[f"_{key}"] = all_present.copy()
+            continue
         first = next(v for v in values if v is not _MISSING)
         if isinstance(first, dict):
             present = [v if v is not _MISSING else {} for v in values]
