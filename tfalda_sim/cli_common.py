@@ -483,7 +483,10 @@ def run_sweep(spec: SweepSpec[J], backend: Backend[Any, Any],
                 on_result(job, result)
             bar.update()
 
-        return consume(items(), keep)
+        try:
+            return consume(items(), keep)
+        except RayUnavailable as exc:  # Ray starts with the first job: bad input, not a bug
+            raise CliError(str(exc)) from None
 
 
 def _prepend(first: J, rest: Iterator[J]) -> Iterator[J]:

@@ -218,13 +218,18 @@ def _start_ray(ray: Any, workers: int | None, address: str | None) -> bool:
     saved = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGHUP)} if main else {}
     try:
         if address is None:
-            ray.init(num_cpus=workers, **kwargs)
+            # "local": a new Ray even if RAY_ADDRESS or `ray start` names a cluster (that is
+            # --ray-address); connecting to one with num_cpus is an error in ray.init.
+            ray.init(address="local", num_cpus=workers, **kwargs)
         else:
             ray.init(address=address, **kwargs)
-    except (ConnectionError, RuntimeError, ValueError) as exc:
+    except (ConnectionError, RuntimeError, ValueError, TimeoutError) as exc:
+        with contextlib.suppress(Exception):
+            ray.shutdown()  # a half-made connection
         where = f"the Ray cluster at {address}" if address else "a local Ray"
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise RayUnavailable(f"could not start {where}: {first}") from None
+        raise RayUnavailable(f"could not {'connect to' if address else 'start'} {where}: "
+                             f"{first}") from None
     finally:
         for sig, handler in saved.items():
             if handler is not None:

@@ -14,6 +14,8 @@ import itertools
 import json
 import logging
 import operator
+import os
+import subprocess
 import sys
 from collections.abc import Iterator
 from functools import partial
@@ -128,6 +130,39 @@ def test_backend_ray_without_ray_names_the_extra(monkeypatch: pytest.MonkeyPatch
     code, _, err = run(capsys, "stress", "--backend", "ray", "--seeds", "0:1", "--out",
                        str(tmp_path / "out"))
     assert code == 2 and "pip install 'tfalda-sim[ray]'" in err and "Traceback" not in err
+
+
+def _in_a_fresh_process(code: str, *argv: str, env: dict[str, str] | None = None
+                        ) -> subprocess.CompletedProcess[str]:
+    """``code`` in a new Python (no Ray connected there, unlike this module's)."""
+    full = {k: v for k, v in os.environ.items() if k not in ("TFALDA_SIM_DEBUG", "RAY_ADDRESS")}
+    return subprocess.run([sys.executable, "-c", code, *argv], env=full | (env or {}),
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_a_ray_cluster_that_cannot_be_reached_is_a_clear_error(tmp_path: Path) -> None:
+    """Ray starts with the sweep's first job, inside the driver: its failure is still bad
+    input (exit 2, one line), not an internal error, and nothing is written."""
+    proc = _in_a_fresh_process(
+        "import sys; from tfalda_sim.cli import main; sys.exit(main(sys.argv[1:]))",
+        "stress", "--backend", "ray", "--ray-address", "bogus::", "--seeds", "0:1",
+        "--faults", "none", "--results", str(tmp_path / "r.jsonl"),
+        "--out", str(tmp_path / "out"))
+    assert proc.returncode == 2, proc.stderr
+    assert "error: could not connect to the Ray cluster at bogus::" in proc.stderr, proc.stderr
+    assert "internal error" not in proc.stderr and "Traceback" not in proc.stderr
+    assert not list(tmp_path.iterdir())  # no report, no results file, no staging left
+
+
+def test_a_local_ray_starts_even_where_ray_address_names_a_cluster() -> None:
+    """Without --ray-address the sweep starts its own local Ray with --workers CPUs, even
+    if RAY_ADDRESS (or `ray start`) names a cluster: ray.init refuses num_cpus there."""
+    proc = _in_a_fresh_process(
+        "import ray; from tfalda_sim.parallel import ray_stream; "
+        "print(list(ray_stream(abs, [-1, -2, -3], workers=1))); print(ray.is_initialized())",
+        env={"RAY_ADDRESS": "127.0.0.1:1"})
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert proc.stdout.split() == ["[1,", "2,", "3]", "False"]  # and shut down after
 
 
 # Reading a results file back.
