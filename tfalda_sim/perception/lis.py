@@ -107,10 +107,14 @@ class LaneInferenceSystem:
         replaced = [False] * len(rows)
         corrected = [(False, False)] * len(rows)
         new_widths = self.widths.copy()
+        # Per row two widths (top, bottom edge): plain floats, the same IEEE operations as
+        # on two-element arrays at a fraction of their cost per frame.
         for r in range(len(rows) - 1, -1, -1):  # bottom row first
             left, right = out[r]
-            measured = np.array(measured_widths(left, right))
-            filtered = (alpha * measured + (1.0 - alpha) * self.widths[r] if cfg.lowpass
+            measured = measured_widths(left, right)
+            last = (float(self.widths[r, 0]), float(self.widths[r, 1]))
+            filtered = ((alpha * measured[0] + (1.0 - alpha) * last[0],
+                         alpha * measured[1] + (1.0 - alpha) * last[1]) if cfg.lowpass
                         else measured)
             ok = True
             if cfg.min_max:
@@ -119,10 +123,11 @@ class LaneInferenceSystem:
                     ok = ok and lo <= measured[k] <= hi
             if ok and cfg.width_change:
                 seen = filtered if cfg.width_check is WidthCheck.FILTERED else measured
-                tol = cfg.width_tolerance_px if self._unit_scale else cfg.width_tolerance_px * (
-                    np.array([tolerance_scale(cfg, left.y_top),
-                              tolerance_scale(cfg, left.y_bottom)]))
-                ok = bool(np.all(np.abs(seen - self.widths[r]) <= tol))
+                tol = cfg.width_tolerance_px
+                tols = (tol, tol) if self._unit_scale else (
+                    tol * tolerance_scale(cfg, left.y_top),
+                    tol * tolerance_scale(cfg, left.y_bottom))
+                ok = abs(seen[0] - last[0]) <= tols[0] and abs(seen[1] - last[1]) <= tols[1]
             if not ok:
                 out[r] = previous[r]
                 replaced[r] = True
