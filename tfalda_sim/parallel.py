@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import itertools
 import logging
 import multiprocessing
 import os
@@ -34,6 +35,7 @@ from typing import Any, Generic, Literal, TypeVar
 
 J = TypeVar("J")
 R = TypeVar("R")
+T = TypeVar("T")
 
 IN_FLIGHT_PER_WORKER: int = 2
 """Jobs submitted ahead per worker: enough to keep every worker busy while the parent
@@ -132,6 +134,24 @@ def _terminate(pool: ProcessPoolExecutor) -> None:
             proc.join(timeout=WORKER_JOIN_TIMEOUT_S)
 
 
+def _in_job_order(submit: Callable[[J], T], collect: Callable[[T], R], jobs: Iterable[J],
+                  limit: int, pending: deque[T]) -> Iterator[R]:
+    """The window both backends keep: ``submit`` jobs (pulled lazily) until ``limit`` are in
+    ``pending`` (the caller's, to cancel on an early close), then ``collect`` the oldest,
+    submit the next job and yield the result: results in job order, never more than
+    ``limit`` jobs ahead."""
+    it = iter(jobs)
+    for job in itertools.islice(it, limit):
+        pending.append(submit(job))
+    while pending:
+        result = collect(pending[0])
+        pending.popleft()
+        for job in it:
+            pending.append(submit(job))
+            break
+        yield result
+
+
 def stream(fn: Callable[[J], R], jobs: Iterable[J], *, workers: int = 1) -> Iterator[R]:
     """``fn(job)`` for every job, results in job order, at most
     ``workers × IN_FLIGHT_PER_WORKER`` jobs ahead. ``workers == 1`` runs in this process.
@@ -148,25 +168,17 @@ def stream(fn: Callable[[J], R], jobs: Iterable[J], *, workers: int = 1) -> Iter
                else None)
     pool = ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
                                initargs=(os.getpid(),), mp_context=context)
+    def collect(future: Future[R]) -> R:
+        try:
+            return future.result()
+        except BrokenProcessPool:
+            raise WorkerDied("a worker process died (killed, perhaps for lack of "
+                             "memory: try fewer --workers)") from None
+
     finished = False
     try:
-        pending: deque[Future[R]] = deque()
-        it = iter(jobs)
-        limit = workers * IN_FLIGHT_PER_WORKER
-        for job in it:
-            pending.append(pool.submit(fn, job))
-            if len(pending) >= limit:
-                break
-        while pending:
-            try:
-                result = pending.popleft().result()
-            except BrokenProcessPool:
-                raise WorkerDied("a worker process died (killed, perhaps for lack of "
-                                 "memory: try fewer --workers)") from None
-            for job in it:
-                pending.append(pool.submit(fn, job))
-                break
-            yield result
+        yield from _in_job_order(lambda job: pool.submit(fn, job), collect, jobs,
+                                 workers * IN_FLIGHT_PER_WORKER, deque())
         finished = True
     finally:
         if finished:
@@ -250,6 +262,21 @@ def ray_stream(fn: Callable[[J], R], jobs: Iterable[J], *, workers: int | None =
     ray = import_ray()
     from ray import exceptions as rex
 
+    def collect(ref: Any) -> Any:
+        # The oldest task only (results in job order), waited for in short steps so a
+        # Ctrl-C is not stuck inside Ray.
+        while not ray.wait([ref], timeout=RAY_POLL_S)[0]:
+            pass
+        try:
+            return ray.get(ref)
+        except (rex.WorkerCrashedError, rex.NodeDiedError, rex.OutOfMemoryError,
+                rex.RaySystemError) as exc:
+            raise WorkerDied(f"a Ray worker died ({type(exc).__name__}; killed, perhaps "
+                             "for lack of memory: try fewer --workers)") from None
+        except rex.RayTaskError as exc:  # the job's own error, as the local pool gives
+            cause = exc.cause if isinstance(exc.cause, BaseException) else exc
+            raise cause from None
+
     started = _start_ray(ray, workers, address)
     pending: deque[Any] = deque()
     try:
@@ -257,30 +284,8 @@ def ray_stream(fn: Callable[[J], R], jobs: Iterable[J], *, workers: int | None =
             workers = max(1, int(ray.cluster_resources().get("CPU", 1)))
         task = ray.remote(num_cpus=1, max_retries=0)(_call)
         fn_ref = ray.put(fn)  # shipped once, not with every task
-        it = iter(jobs)
-        limit = workers * IN_FLIGHT_PER_WORKER
-        for job in it:
-            pending.append(task.remote(fn_ref, job))
-            if len(pending) >= limit:
-                break
-        while pending:
-            # Wait on the oldest task only (results in job order), in short steps so a
-            # Ctrl-C is not stuck inside Ray.
-            while not ray.wait([pending[0]], timeout=RAY_POLL_S)[0]:
-                pass
-            try:
-                result = ray.get(pending.popleft())
-            except (rex.WorkerCrashedError, rex.NodeDiedError, rex.OutOfMemoryError,
-                    rex.RaySystemError) as exc:
-                raise WorkerDied(f"a Ray worker died ({type(exc).__name__}; killed, perhaps "
-                                 "for lack of memory: try fewer --workers)") from None
-            except rex.RayTaskError as exc:  # the job's own error, as the local pool gives
-                cause = exc.cause if isinstance(exc.cause, BaseException) else exc
-                raise cause from None
-            for job in it:
-                pending.append(task.remote(fn_ref, job))
-                break
-            yield result
+        yield from _in_job_order(lambda job: task.remote(fn_ref, job), collect, jobs,
+                                 workers * IN_FLIGHT_PER_WORKER, pending)
     finally:
         for ref in pending:  # an early close: nothing more is wanted
             with contextlib.suppress(Exception):
