@@ -113,8 +113,14 @@ class TfaldaTrackVectorEnv(VectorEnv):
 
     # ------------------------------------------------------------------ protocol
     def _send(self, command: str, per_worker: Sequence[Any]) -> None:
-        for conn, data in zip(self._conns, per_worker, strict=True):
-            conn.send((command, data))
+        for w, (conn, data) in enumerate(zip(self._conns, per_worker, strict=True)):
+            try:
+                conn.send((command, data))
+            except (BrokenPipeError, ConnectionError, OSError):
+                code = self._procs[w].exitcode
+                self.close()
+                raise RuntimeError(f"worker {w} of the vector env died (exit code {code}); "
+                                   "make a new one with gymnasium.make_vec") from None
 
     def _gather(self, command: str) -> list[Any]:
         """Every worker's answer; a worker's error raised here (after all have answered, so
@@ -298,9 +304,10 @@ def _merge_infos(infos: list[dict[str, Any]]) -> dict[str, Any]:
             merged[f"_{key}"] = all_present.copy()
             continue
         first = next(v for v in values if v is not _MISSING)
+        mask = np.array([v is not _MISSING for v in values], dtype=np.bool_)
         if isinstance(first, dict):
             present = [v if v is not _MISSING else {} for v in values]
-            merged[key] = _merge_infos(present)
+            merged[key], merged[f"_{key}"] = _merge_infos(present), mask
             continue
         if type(first) in (int, float, bool) or isinstance(first, np.number):
             column = np.zeros(n, dtype=type(first))
@@ -308,11 +315,9 @@ def _merge_infos(infos: list[dict[str, Any]]) -> dict[str, Any]:
             column = np.zeros((n, *first.shape), dtype=first.dtype)
         else:
             column = np.full(n, fill_value=None, dtype=object)
-        mask = np.zeros(n, dtype=np.bool_)
         for i, v in enumerate(values):
             if v is not _MISSING:
                 column[i] = v
-                mask[i] = True
         merged[key] = column
         merged[f"_{key}"] = mask
     return merged

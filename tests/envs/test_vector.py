@@ -132,3 +132,31 @@ def test_call_and_close() -> None:
     with pytest.raises(RuntimeError, match="closed"):
         venv.step(np.zeros((2, 1), np.float32))
     venv.close()  # twice is fine
+
+
+def test_merged_infos_match_gymnasiums_layout_also_nested_and_missing_keys() -> None:
+    from tfalda_sim.envs.vector import _merge_infos
+
+    infos = [{"a": 1.0, "b": {"c": 2, "d": "x"}, "e": np.zeros(3, np.float32)},
+             {"a": 3.0, "b": {"c": 4}}]
+    sync = gym.vector.SyncVectorEnv([lambda: gym.make("CartPole-v1")] * 2)
+    want: dict[str, Any] = {}
+    for i, info in enumerate(infos):
+        want = sync._add_info(want, info, i)
+    sync.close()
+    assert_same(_merge_infos(infos), want)
+
+
+def test_a_dead_worker_is_a_clear_error() -> None:
+    venv = TfaldaTrackVectorEnv(2, workers=2, track="oval")
+    procs = list(venv._procs)
+    try:
+        venv.reset(seed=0)
+        venv._procs[1].kill()
+        venv._procs[1].join()
+        with pytest.raises(RuntimeError, match="died"):
+            venv.step(np.zeros((2, 1), np.float32))
+            venv.step(np.zeros((2, 1), np.float32))
+    finally:
+        venv.close()
+    assert all(not p.is_alive() for p in procs)
