@@ -136,6 +136,11 @@ of MB); more than this is a typo, not a training set-up."""
 MAX_ENV_RUNNERS: int = 4096
 """Most RLlib env runners (a cluster's CPUs): more is a typo."""
 
+MAX_TRAIN_BATCH: int = 1_000_000
+"""Largest ``--train-batch`` [env steps]: one iteration's batch lives in the driver's memory
+(observations, actions, values, advantages: ≈ 0.3 kB a step, ≈ 0.3 GB at this bound), far
+beyond any useful PPO batch."""
+
 TRAIN_BACKENDS: tuple[str, ...] = ("sb3", "rllib")
 """What ``train`` trains with: stable-baselines3 (local) or RLlib (Ray, local or cluster)."""
 
@@ -166,8 +171,9 @@ def _train_parser(sub: Any) -> None:
     tr.add_argument("--env-runners", type=bounded_int_arg(0, MAX_ENV_RUNNERS),
                     help=f"rllib: Ray actors sampling the env, one CPU each (0–"
                          f"{MAX_ENV_RUNNERS}, default 2; 0: sample in this process)")
-    tr.add_argument("--train-batch", type=bounded_int_arg(1, 10**9),
-                    help="rllib: env steps collected per training iteration (default 2048)")
+    tr.add_argument("--train-batch", type=bounded_int_arg(1, MAX_TRAIN_BATCH),
+                    help=f"rllib: env steps collected per training iteration (1–"
+                         f"{MAX_TRAIN_BATCH}, default 2048)")
     tr.add_argument("--ray-address", metavar="ADDR",
                     help="rllib: a running Ray cluster, 'auto' or HOST:PORT (default: start a "
                          "local Ray with --env-runners CPUs for this run)")

@@ -165,6 +165,7 @@ def test_console_script_trains_every_iteration(tmp_path: Path) -> None:
      "--env-runners and --train-batch are for --backend rllib, not sb3"),
     (["--backend", "rllib", "--env-runners", "-1"], "expected an integer from 0"),
     (["--backend", "rllib", "--train-batch", "0"], "expected an integer from 1"),
+    (["--backend", "rllib", "--train-batch", "1000001"], "from 1 to 1000000"),  # memory
 ])
 def test_options_of_the_other_backend_are_refused(
         argv: list[str], message: str, tmp_path: Path,
