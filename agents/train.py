@@ -20,7 +20,7 @@ import signal
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +49,11 @@ class PpoConfig:
     clip_range: float = 0.2
     ent_coef: float = 0.0
     net_arch: tuple[int, ...] = (64, 64)
+    log_std_init: float = 0.0
+    """Initial log standard deviation of the Gaussian steering noise."""
+    lr_decay: bool = False
+    """Decay the learning rate linearly to 0 over the run."""
+    target_kl: float | None = None
 
 
 def env_kwargs(speed_m_s: float = TRAIN_SPEED_M_S, seeds: tuple[int, int] = TRAIN_SEEDS,
@@ -71,6 +76,11 @@ def _make_env(**kwargs: Any) -> Any:
 
     if multiprocessing.parent_process() is not None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        # The parallelism is the workers': OpenCV's own thread pool (a thread per core in
+        # every worker) would oversubscribe the cores.
+        import cv2
+
+        cv2.setNumThreads(1)
     return gymnasium.make("tfalda_sim:TfaldaTrack-v0", **kwargs)
 
 
@@ -82,7 +92,9 @@ def _progress_callback(total: int) -> Any:
 
     class TqdmCallback(BaseCallback):
         def _on_training_start(self) -> None:
-            self.bar = tqdm(total=total, desc="train", unit="step")
+            # The rate is per env step, over the run so far (updates included): the
+            # rollouts alone would flatter it.
+            self.bar = tqdm(total=total, desc="train", unit="step", smoothing=0)
 
         def _on_step(self) -> bool:
             self.bar.update(self.training_env.num_envs)
@@ -144,8 +156,8 @@ def _existing_ancestor(path: Path) -> Path:
 
 def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfig | None = None,
           speed_m_s: float = TRAIN_SPEED_M_S, progress: bool = True,
-          subprocess: bool = True, track: str | int | None = None, camera: str = "thesis"
-          ) -> dict[str, Any]:
+          subprocess: bool = True, track: str | int | None = None, camera: str = "thesis",
+          checkpoint_steps: int = 100_000) -> dict[str, Any]:
     """Train PPO and save it under ``out``; returns the summary written to train.json.
     ``track`` fixes the track (default: the generated ``TRAIN_SEEDS``); ``camera`` is the
     car's camera (a profile name or file).
@@ -153,6 +165,7 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
     The run is written to a staging folder beside ``out`` and moved into ``out`` when it
     ends: an error leaves ``out`` as it was. A Ctrl-C ends the training early and keeps
     the policy so far (``summary["interrupted"]``, ``summary["timesteps_done"]``)."""
+    import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
     from stable_baselines3.common.env_util import make_vec_env
@@ -160,6 +173,10 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
 
     cfg = config or PpoConfig()
     out = Path(out)
+    # One torch thread (restored at the end): during rollouts the env workers hold the
+    # cores, and a 64-64 MLP's minibatch updates gain nothing from a second one.
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
     # Staged in the nearest existing folder (same file system, so the final moves are
     # renames): a failed or early-interrupted run creates no folder at all.
     staging = Path(tempfile.mkdtemp(prefix=".tfalda-sim-", suffix=".tmp",
@@ -171,13 +188,17 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
                             env_kwargs=env_kwargs(speed_m_s, track=track, camera=camera))
         interrupted = False
         try:
+            lr = cfg.learning_rate
             model = PPO("MlpPolicy", venv, n_steps=cfg.n_steps, batch_size=cfg.batch_size,
-                        n_epochs=cfg.n_epochs, learning_rate=cfg.learning_rate,
+                        n_epochs=cfg.n_epochs,
+                        learning_rate=(lambda rest: rest * lr) if cfg.lr_decay else lr,
                         gamma=cfg.gamma, gae_lambda=cfg.gae_lambda, clip_range=cfg.clip_range,
-                        ent_coef=cfg.ent_coef, policy_kwargs={"net_arch": list(cfg.net_arch)},
+                        ent_coef=cfg.ent_coef, target_kl=cfg.target_kl,
+                        policy_kwargs={"net_arch": list(cfg.net_arch),
+                                       "log_std_init": cfg.log_std_init},
                         seed=seed, device="cpu", verbose=0,
                         tensorboard_log=str(staging / "tb"))
-            callbacks = [CheckpointCallback(max(1, 100_000 // n_envs),
+            callbacks = [CheckpointCallback(max(1, checkpoint_steps // n_envs),
                                             str(staging / "checkpoints"), name_prefix="ppo")]
             bar = None
             if progress:  # PPO learns in whole rollouts of n_steps per env
@@ -204,12 +225,14 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
                 venv.close()
         summary = _summary(timesteps, n_envs, seed, speed_m_s, track, cfg, elapsed, out,
                            camera)
-        summary.update(interrupted=interrupted, timesteps_done=int(model.num_timesteps))
+        summary.update(interrupted=interrupted, timesteps_done=int(model.num_timesteps),
+                       steps_per_s=model.num_timesteps / elapsed if elapsed > 0 else None)
         (staging / "train.json").write_text(json.dumps(summary, indent=2))
         _publish_run(staging, out)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
         shield.close()
+        torch.set_num_threads(threads)
     return summary
 
 
@@ -218,7 +241,7 @@ def _summary(timesteps: int, n_envs: int, seed: int, speed_m_s: float,
              camera: str = "thesis") -> dict[str, Any]:
     return {"timesteps": timesteps, "n_envs": n_envs, "seed": seed, "speed_m_s": speed_m_s,
             "camera": camera,
-               "track": track, "train_seeds": list(TRAIN_SEEDS), "config": cfg.__dict__ | {
+               "track": track, "train_seeds": list(TRAIN_SEEDS), "config": asdict(cfg) | {
                    "net_arch": list(cfg.net_arch)},
                "train_time_s": elapsed, "cores": os.cpu_count(),
                "python": platform.python_version(),

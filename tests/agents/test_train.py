@@ -43,3 +43,18 @@ def test_short_ppo_training_improves_the_return(tmp_path) -> None:
     before = mean_return(PpoAgent(tmp_path / "untrained.zip"))
     after = mean_return(PpoAgent(tmp_path / "run" / "policy.zip"))
     assert after > before + 50.0, (before, after)
+
+
+def test_config_reaches_the_model_and_the_run_reports_its_rate(tmp_path) -> None:
+    """The exploration noise and the learning-rate decay of PpoConfig are the saved
+    model's; train.json has the rate; the caller's torch threads are left as they were."""
+    torch.set_num_threads(2)
+    config = PpoConfig(n_steps=128, batch_size=64, n_epochs=1, learning_rate=1e-3,
+                       log_std_init=-1.0, lr_decay=True)
+    summary = train(128, 1, 0, tmp_path / "run", config=config, progress=False,
+                    subprocess=False, track="oval")
+    assert torch.get_num_threads() == 2
+    assert summary["steps_per_s"] > 0 and summary["config"]["log_std_init"] == -1.0
+    model = PPO.load(tmp_path / "run" / "policy.zip", device="cpu")
+    assert abs(float(model.policy.log_std.detach().mean()) + 1.0) < 0.05  # one small update
+    assert model.lr_schedule(1.0) == 1e-3 and model.lr_schedule(0.25) == 2.5e-4
