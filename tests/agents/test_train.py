@@ -30,7 +30,9 @@ def mean_return(policy: PpoAgent, episodes: int = 3, steps: int = 300) -> float:
 
 def test_short_ppo_training_improves_the_return(tmp_path) -> None:
     torch.set_num_threads(1)
-    config = PpoConfig(n_steps=512, batch_size=128, learning_rate=1e-3)
+    # A constant rate and σ = 1 (the defaults decay the rate over a run of 100 k steps).
+    config = PpoConfig(n_steps=512, batch_size=128, learning_rate=1e-3, log_std_init=0.0,
+                       lr_decay=False)
     # An untrained policy of the same architecture: the starting point.
     untrained = PPO("MlpPolicy", TfaldaTrackEnv(track="oval"), seed=0, device="cpu",
                     policy_kwargs={"net_arch": list(config.net_arch)})
