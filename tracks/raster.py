@@ -15,12 +15,8 @@ integers, ready for ``cv2.remap``.
 
 from __future__ import annotations
 
-import ctypes
 import math
 import mmap
-import threading
-import weakref
-from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import TYPE_CHECKING
@@ -136,10 +132,8 @@ def _paint_pixel(
     start_s: float,
     start_w: float,
     stop_w: float,
-    with_labels: bool,
 ) -> None:
-    """Paint one pixel at road coordinates ``(s, d)`` [m] (its label too if
-    ``with_labels``; the intensity never depends on the labels)."""
+    """Paint one pixel at road coordinates ``(s, d)`` [m]."""
     half_road = lane_w + 0.5 * line_w
     # Intersections: no lines inside the crossing road, stop lines before it.
     cut = 0.0
@@ -188,8 +182,6 @@ def _paint_pixel(
     before = intensity[r, q]
     if value > before:
         intensity[r, q] = value
-    if not with_labels:
-        return
     if best_paint >= 0.5 and value >= before:
         labels[r, q] = best_label
     elif best_virtual >= 0.5 and labels[r, q] == 0:
@@ -230,10 +222,8 @@ def _raster_kernel(
     chunk_m: float,
     todo: np.ndarray,
     tile: int,
-    with_labels: bool,
 ) -> None:
-    """Paint the pixels of the tiles marked in ``todo`` (``tile`` × ``tile`` px each);
-    ``labels`` only if ``with_labels`` (else any array: it is not touched).
+    """Paint the pixels of the tiles marked in ``todo`` (``tile`` × ``tile`` px each).
 
     Chunks and pixels are visited in the same order whatever the tiles, and every pixel's
     value depends only on its own centre, so a tile painted alone equals the same tile of
@@ -350,7 +340,7 @@ def _raster_kernel(
                                 s -= total
                             _paint_pixel(intensity, labels, r, q, s, d, res, total, closed, lane_w,
                                          line_w, dash, period, gap_line, gap_lo, gap_hi, passes,
-                                         start_s, start_w, stop_w, with_labels)
+                                         start_s, start_w, stop_w)
 
 
 _LINE_INDEX = {"right": 0, "centre": 1, "left": 2}
@@ -428,85 +418,9 @@ def untouched_zeros(shape: tuple[int, ...]) -> np.ndarray:
     return np.frombuffer(mmap.mmap(-1, size), np.uint8, math.prod(shape)).reshape(shape)
 
 
-class ZeroPool:
-    """Zeroed anonymous memory handed back and reused: a fresh page costs a page fault
-    (≈ 2 µs) when first written and unmapping written pages costs too, so a scene built
-    after another reuses the memory of one nobody holds any more.
-
-    ``zeros(shape)`` gives a uint8 zero array and a list of *cleaners*: the array lives
-    on a region of the pool (or a fresh one), leased through an object only the array
-    and its views reach. When the last of them is gone (nothing can read or write the
-    memory any more), the cleaners, called with an array of the same shape on the
-    region, put its written bytes back to zero and the region returns to the pool (a
-    lease with no cleaner is unmapped: who knows what was written). At most ``keep``
-    regions wait in the pool, the largest; a request takes the smallest that fits, and
-    a new region is as large as the largest made so far (mapping costs nothing until
-    written), so that regions fit the next requests."""
-
-    def __init__(self, keep: int = 2) -> None:
-        self.keep = keep
-        self._free: list[mmap.mmap] = []
-        self._lock = threading.Lock()
-        self._largest = 0
-
-    def zeros(self, shape: tuple[int, ...]
-              ) -> tuple[np.ndarray, list[Callable[[np.ndarray], None]]]:
-        size = max(1, math.prod(shape))
-        region = None
-        with self._lock:
-            fits = [m for m in self._free if len(m) >= size]
-            if fits:
-                region = min(fits, key=len)
-                self._free.remove(region)
-            if region is None:
-                # As large as the largest region yet: a later, larger request fits it.
-                self._largest = max(self._largest, size)
-                size_new = self._largest
-        if region is None:
-            region = mmap.mmap(-1, size_new)
-        lease = (ctypes.c_char * size).from_buffer(region)
-        array = np.frombuffer(lease, np.uint8, math.prod(shape)).reshape(shape)
-        cleaners: list[Callable[[np.ndarray], None]] = []
-        weakref.finalize(lease, self._give_back, region, shape, cleaners).atexit = False
-        return array, cleaners
-
-    def _give_back(self, region: mmap.mmap, shape: tuple[int, ...],
-                   cleaners: list[Callable[[np.ndarray], None]]) -> None:
-        if not cleaners:
-            return  # unmapped once the lease lets go of it (closing it here would fail)
-        view = np.frombuffer(region, np.uint8, math.prod(shape)).reshape(shape)
-        for clean in cleaners:
-            clean(view)
-        del view
-        with self._lock:
-            self._free.append(region)
-            self._free.sort(key=len, reverse=True)
-            del self._free[self.keep:]  # unmapped as they go
-
-
-_NO_LABELS = np.zeros((1, 1), np.uint8)  # the kernel's labels argument when there are none
-
 TILE_PX: int = 32
 """Edge of a tile of a ``TiledMarkingMap`` [px] (12.8 cm at 4 mm/px): the unit painted on
 demand."""
-
-
-def map_geometry(track: Track, resolution_m: float = DEFAULT_RESOLUTION_M,
-                 margin_m: float = dimensions.MAT_EDGE_MARGIN_M
-                 ) -> tuple[tuple[float, float], tuple[int, int]]:
-    """Where the marking map of ``track`` lies: the world ``(x, y)`` [m] of its top-left
-    corner and its ``(rows, cols)`` (checked against ``MAX_MAP_PIXELS``)."""
-    if not (math.isfinite(resolution_m) and resolution_m > 0):
-        raise ValueError(f"resolution_m must be > 0, got {resolution_m!r}")
-    xmin, ymin, xmax, ymax = track.bounds(margin_m)
-    n_cols = int(math.ceil((xmax - xmin) / resolution_m))
-    n_rows = int(math.ceil((ymax - ymin) / resolution_m))
-    if n_cols * n_rows > MAX_MAP_PIXELS:
-        raise ValueError(f"a {n_cols}×{n_rows} map is too large (more than MAX_MAP_PIXELS = "
-                         f"{MAX_MAP_PIXELS}: {math.sqrt(MAX_MAP_PIXELS) * resolution_m:.0f} m "
-                         f"square at {resolution_m * 1000:g} mm/px); use a coarser "
-                         "resolution_m")
-    return (xmin, ymax), (n_rows, n_cols)
 
 
 class TiledMarkingMap:
@@ -516,34 +430,29 @@ class TiledMarkingMap:
     ``intensity`` and ``labels`` are full-size arrays of ``untouched_zeros`` (pages never
     written cost no memory); a tile once painted holds exactly the values ``rasterize``
     gives there. ``filled`` marks the painted tiles, ``(ceil(H / tile_px),
-    ceil(W / tile_px))`` uint8.
-
-    ``intensity``: paint into this zero array of the map's shape instead (e.g. level 0 of
-    a scene's mip atlas: no copy); ``labels=False``: no label map (``labels`` is None;
-    a scene reads only the intensity, and the labels' pages cost page faults);
-    ``geometry``: ``map_geometry``'s result, if already known."""
+    ceil(W / tile_px))`` uint8."""
 
     def __init__(self, track: Track, resolution_m: float = DEFAULT_RESOLUTION_M,
                  margin_m: float = dimensions.MAT_EDGE_MARGIN_M,
-                 tile_px: int = TILE_PX, *, intensity: np.ndarray | None = None,
-                 labels: bool = True,
-                 geometry: tuple[tuple[float, float], tuple[int, int]] | None = None) -> None:
+                 tile_px: int = TILE_PX) -> None:
         if not (math.isfinite(resolution_m) and resolution_m > 0):
             raise ValueError(f"resolution_m must be > 0, got {resolution_m!r}")
         if not (isinstance(tile_px, int) and tile_px > 0):
             raise ValueError(f"tile_px must be a positive int, got {tile_px!r}")
-        (xmin, ymax), (n_rows, n_cols) = (geometry if geometry is not None
-                                          else map_geometry(track, resolution_m, margin_m))
-        if intensity is not None and (intensity.shape != (n_rows, n_cols)
-                                      or intensity.dtype != np.uint8):
-            raise ValueError(f"intensity must be uint8 of shape {(n_rows, n_cols)}, got "
-                             f"{intensity.dtype} {intensity.shape}")
+        xmin, ymin, xmax, ymax = track.bounds(margin_m)
+        n_cols = int(math.ceil((xmax - xmin) / resolution_m))
+        n_rows = int(math.ceil((ymax - ymin) / resolution_m))
+        if n_cols * n_rows > MAX_MAP_PIXELS:
+            raise ValueError(f"a {n_cols}×{n_rows} map is too large (more than MAX_MAP_PIXELS = "
+                             f"{MAX_MAP_PIXELS}: {math.sqrt(MAX_MAP_PIXELS) * resolution_m:.0f} m "
+                             f"square at {resolution_m * 1000:g} mm/px); use a coarser "
+                             "resolution_m")
         self.track = track
         self.origin_m = (xmin, ymax)
         self.resolution_m = float(resolution_m)
         self.tile_px = tile_px
-        self.intensity = untouched_zeros((n_rows, n_cols)) if intensity is None else intensity
-        self.labels = untouched_zeros((n_rows, n_cols)) if labels else None
+        self.intensity = untouched_zeros((n_rows, n_cols))
+        self.labels = untouched_zeros((n_rows, n_cols))
         self.filled = np.zeros((-(-n_rows // tile_px), -(-n_cols // tile_px)), np.uint8)
         t = track.table
         gaps = track.gaps
@@ -576,15 +485,11 @@ class TiledMarkingMap:
         todo = (np.asarray(tiles, dtype=bool) & (self.filled == 0)).astype(np.uint8)
         if not todo.any():
             return
-        labels = self.labels if self.labels is not None else _NO_LABELS
-        _raster_kernel(self.intensity, labels, *self._args, todo, self.tile_px,
-                       self.labels is not None)
+        _raster_kernel(self.intensity, self.labels, *self._args, todo, self.tile_px)
         self.filled |= todo
 
     def fill_all(self) -> MarkingMap:
-        """Paint every tile; the whole map (a map without labels has none to give)."""
-        if self.labels is None:
-            raise ValueError("a TiledMarkingMap without labels is no MarkingMap")
+        """Paint every tile; the whole map."""
         self.fill(np.ones(self.filled.shape, bool))
         return MarkingMap(self.intensity, self.labels, self.origin_m, self.resolution_m)
 

@@ -10,7 +10,6 @@ is drawn from the ``numpy.random.Generator`` passed in.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -18,13 +17,7 @@ import numpy as np
 from numba import njit
 
 from tfalda_sim.tracks import MarkingMap, Track, rasterize
-from tfalda_sim.tracks.raster import (
-    DEFAULT_RESOLUTION_M,
-    TILE_PX,
-    TiledMarkingMap,
-    ZeroPool,
-    map_geometry,
-)
+from tfalda_sim.tracks.raster import TILE_PX, TiledMarkingMap, untouched_zeros
 from tfalda_sim.tracks.rules import obstacle_corners
 
 from .effects import Effects
@@ -272,64 +265,18 @@ def _mip_tiles(atlas: np.ndarray, origins: np.ndarray, need: np.ndarray, sizes: 
                         atlas[dy + r, dx + c] = np.uint8((a + 2) >> 2)
 
 
-@njit(cache=True)
-def _zero_tiles(atlas: np.ndarray, filled: np.ndarray, marking_filled: np.ndarray,
-                sizes: np.ndarray, origins: np.ndarray, tile: np.ndarray, grids: np.ndarray,
-                offsets: np.ndarray) -> None:
-    """Zero the marking tiles of every level marked in ``filled`` and the level-0 tiles
-    marked in ``marking_filled`` (a marking map painting into the atlas)."""
-    for lv in range(sizes.shape[0]):
-        t = tile[lv]
-        ox, oy = origins[lv, 0], origins[lv, 1]
-        for tr in range(grids[lv, 0]):
-            for tc in range(grids[lv, 1]):
-                if not filled[offsets[lv] + tr * grids[lv, 1] + tc] and not (
-                        lv == 0 and marking_filled[tr, tc]):
-                    continue
-                for r in range(tr * t, min((tr + 1) * t, sizes[lv, 0])):
-                    for c in range(tc * t, min((tc + 1) * t, sizes[lv, 1])):
-                        atlas[oy + r, ox + c] = 0
-
-
-def _atlas_cleaner(tiles: MipTiles) -> Callable[[np.ndarray], None]:
-    """What ``_ATLAS_POOL`` calls to zero what ``tiles`` wrote into its atlas (it holds
-    the tile masks, never the atlas: the atlas must be free to go)."""
-    args = (tiles.filled, tiles.marking.filled if tiles.level0_in_atlas
-            else np.zeros((1, 1), np.uint8), tiles.sizes, tiles.origins, tiles.tile,
-            tiles.grids, tiles.offsets)
-    wall_filled, (wx, wy), wall_w = tiles.wall_filled, tiles.wall_origin, tiles.wall.shape[1]
-
-    def clean(atlas: np.ndarray) -> None:
-        _zero_tiles(atlas, *args)
-        rows = np.flatnonzero(wall_filled)
-        if len(rows):
-            atlas[wy + rows[0]:wy + rows[-1] + 1, wx:wx + wall_w + 1] = 0
-    return clean
-
-
-_ATLAS_POOL = ZeroPool()
-"""The memory of lazy scenes' atlases, reused once a scene is gone."""
-
-
 class MipTiles:
     """The marking levels of a lazy scene's atlas, filled tile by tile as views need
     them: a tile of level 0 is painted by the marking map, a tile of level L is the box
     average of the tiles of level L − 1 under it. Filled tiles hold exactly the eager
     atlas's texels; the rest of the atlas is untouched zeros (no memory). The wall
     texture is copied in row by row as views read it (the ROIs see no wall: every atlas
-    row written costs a page fault).
-
-    ``level0_in_atlas``: the marking map paints straight into the atlas's level 0 (its
-    ``intensity`` is a view of it: a scene without wear), so nothing is copied."""
+    row written costs a page fault)."""
 
     def __init__(self, marking: TiledMarkingMap, atlas: np.ndarray, sizes: list[tuple[int, int]],
                  origins: list[tuple[int, int]], worn: np.ndarray | None,
-                 wall: np.ndarray, wall_origin: tuple[int, int], *,
-                 level0_in_atlas: bool = False) -> None:
-        if level0_in_atlas and worn is not None:
-            raise ValueError("worn paint needs its own level 0 (intensity × wear)")
+                 wall: np.ndarray, wall_origin: tuple[int, int]) -> None:
         self.marking = marking
-        self.level0_in_atlas = level0_in_atlas
         self.atlas = atlas
         self.wall = wall
         self.wall_origin = wall_origin
@@ -385,13 +332,12 @@ class MipTiles:
         g0 = self.grids[0]
         need0 = self.need[:g0[0] * g0[1]].reshape(g0[0], g0[1])
         self.marking.fill(need0)
-        if not self.level0_in_atlas:
-            use_wear = self._worn is not None
-            if use_wear and self._remaining is None:
-                self._remaining = _wear_remaining(self._worn, self.marking.shape)
-            remaining = self._remaining if use_wear else np.ones((1, 1), np.float32)
-            _store_level0(self.atlas, ATLAS_GUARD, self.marking.intensity, remaining,
-                          use_wear, need0, int(self.tile[0]))
+        use_wear = self._worn is not None
+        if use_wear and self._remaining is None:
+            self._remaining = _wear_remaining(self._worn, self.marking.shape)
+        remaining = self._remaining if use_wear else np.ones((1, 1), np.float32)
+        _store_level0(self.atlas, ATLAS_GUARD, self.marking.intensity, remaining, use_wear,
+                      need0, int(self.tile[0]))
         _mip_tiles(self.atlas, self.origins, self.need, self.sizes, self.tile, self.grids,
                    self.offsets)
         self.filled |= self.need
@@ -490,12 +436,14 @@ def _cached_wall_texture(rng: np.random.Generator, hall: Hall) -> np.ndarray:
     return hit[0]
 
 
-def _marking_for(track: Track) -> TiledMarkingMap | None:
-    """The lazily painted marking map of the last scene built on an equal track (a new
-    appearance on the same track repaints nothing); None if there is none."""
+def _marking_for(track: Track) -> TiledMarkingMap:
+    """The lazily painted marking map of ``track``, shared with the last scene built on
+    an equal track (a new appearance on the same track repaints nothing)."""
     if _last_marking and (_last_marking[0].track is track or _last_marking[0].track == track):
         return _last_marking[0]
-    return None
+    marking = TiledMarkingMap(track)
+    _last_marking[:] = [marking]
+    return marking
 
 
 def build_scene(track: Track, effects: Effects | None = None,
@@ -513,31 +461,13 @@ def build_scene(track: Track, effects: Effects | None = None,
     tiles = None
     if lazy and marking_map is None:
         marking = _marking_for(track)
-        if marking is None:
-            geometry = map_geometry(track)
-            origin_m, shape = geometry
-            resolution_m = DEFAULT_RESOLUTION_M
-        else:
-            shape, resolution_m, origin_m = marking.shape, marking.resolution_m, marking.origin_m
+        shape, resolution_m, origin_m = marking.shape, marking.resolution_m, marking.origin_m
         worn = _wear_noise(rng, shape, fx.wear) if fx.wear > 0 else None
         wall = _cached_wall_texture(rng, hall)
         (height, width), sizes, level_xy, wall_origin = _atlas_layout(shape, wall.shape)
-        # Unfilled tiles and walls cost nothing; the memory of a scene nobody holds any
-        # more is reused (its pages already mapped), zeroed where it was written.
-        atlas, cleaners = _ATLAS_POOL.zeros((height, width))
+        atlas = untouched_zeros((height, width))  # unfilled tiles and walls cost nothing
         origins = np.array(level_xy, np.float32)
-        in_atlas = False
-        if marking is None:
-            # Without wear, level 0 is the paint itself: painted straight into the atlas.
-            # (No labels: a scene reads none.)
-            in_atlas = worn is None
-            g = ATLAS_GUARD
-            level0 = atlas[g:g + shape[0], g:g + shape[1]] if in_atlas else None
-            marking = TiledMarkingMap(track, intensity=level0, labels=False, geometry=geometry)
-            _last_marking[:] = [marking]
-        tiles = MipTiles(marking, atlas, sizes, level_xy, worn, wall, wall_origin,
-                         level0_in_atlas=in_atlas)
-        cleaners.append(_atlas_cleaner(tiles))
+        tiles = MipTiles(marking, atlas, sizes, level_xy, worn, wall, wall_origin)
     else:
         m = marking_map if marking_map is not None else rasterize(track)
         shape, resolution_m, origin_m = m.shape, m.resolution_m, m.origin_m

@@ -11,7 +11,6 @@ import pytest
 
 from tests.conftest import generated
 from tfalda_sim.rendering import DomainRandomization, Effects, Renderer, build_scene
-from tfalda_sim.rendering import scene as scene_module
 from tfalda_sim.rendering.scene import (
     MipTiles,
     _atlas,
@@ -21,7 +20,7 @@ from tfalda_sim.rendering.scene import (
     _propagate,
 )
 from tfalda_sim.tracks import Track, load_named
-from tfalda_sim.tracks.raster import TiledMarkingMap, ZeroPool, untouched_zeros
+from tfalda_sim.tracks.raster import TiledMarkingMap, untouched_zeros
 
 ROIS = [(195, 260, 150, 75), (365, 260, 150, 75), (80, 340, 180, 85), (429, 340, 180, 85)]
 
@@ -257,56 +256,3 @@ def test_prepare_without_wall_rows_copies_every_wall_row() -> None:
     (wx, wy), (cols, rows) = eager.wall_origin, eager.wall_size
     np.testing.assert_array_equal(scene.atlas[wy:wy + rows, wx:wx + cols + 1],
                                   eager.atlas[wy:wy + rows, wx:wx + cols + 1])
-
-
-def test_a_scene_the_user_holds_keeps_its_memory_and_frames(renderer: Renderer) -> None:
-    """Atlas memory is recycled only once nothing reaches it: an old scene (or a view of
-    its atlas) held through many new scenes still renders its own frames, and every new
-    scene on recycled memory renders the eager scene's frames."""
-    pool = ZeroPool()
-    old_pool, scene_module._ATLAS_POOL = scene_module._ATLAS_POOL, pool
-    try:
-        held = build_scene(generated(21), Effects())
-        pose = _poses(held.track, 1, 0)[0]
-        first = renderer.render(held, pose, frame_seed=1)
-        atlas_view = held.atlas[100:200]
-        before = atlas_view.copy()
-        for seed in (22, 23, 21, 24, 25):
-            scene = build_scene(generated(seed), Effects())
-            eager = build_scene(generated(seed), Effects(), lazy=False)
-            p = _poses(scene.track, 1, seed)[0]
-            for got, want in zip(renderer.render_windows(scene, p, ROIS, frame_seed=2),
-                                 renderer.render_windows(eager, p, ROIS, frame_seed=2),
-                                 strict=True):
-                np.testing.assert_array_equal(got, want)
-            np.testing.assert_array_equal(renderer.render(scene, p, frame_seed=2),
-                                          renderer.render(eager, p, frame_seed=2))
-            del scene, eager
-        assert pool._free  # the new scenes' memory came back
-        np.testing.assert_array_equal(renderer.render(held, pose, frame_seed=1), first)
-        del held
-        np.testing.assert_array_equal(atlas_view, before)  # a view keeps the memory too
-    finally:
-        scene_module._ATLAS_POOL = old_pool
-
-
-def test_recycled_memory_comes_back_zero() -> None:
-    pool = ZeroPool(keep=1)
-    a, cleaners = pool.zeros((64, 100))
-    a[3:5, 10:20] = 7
-    cleaners.append(lambda arr: arr.__setitem__((slice(3, 5), slice(10, 20)), 0))
-    region_size = len(pool._free)
-    del a
-    assert len(pool._free) == region_size + 1
-    b, _ = pool.zeros((50, 100))  # smaller: the same region, all zero
-    assert not pool._free and not b.any()
-    del b  # no cleaner: unknown writes, the region is dropped
-    assert not pool._free
-
-
-def test_scene_without_wear_paints_level_0_in_its_atlas() -> None:
-    scene = build_scene(generated(31), Effects.off())
-    assert scene.tiles.level0_in_atlas and scene.tiles.marking.labels is None
-    assert np.shares_memory(scene.tiles.marking.intensity, scene.atlas)
-    worn = build_scene(generated(32), replace(Effects(), wear=0.5), np.random.default_rng(1))
-    assert not worn.tiles.level0_in_atlas
