@@ -72,9 +72,11 @@ class RllibConfig:
     """How RLlib trains: ``PpoConfig``'s hyper-parameters mapped onto RLlib's PPO, plus
     the sampling set-up. ``train_batch`` env steps are collected per iteration by
     ``env_runners`` Ray actors (0: in the driver), then ``ppo.n_epochs`` passes of
-    mini-batches of ``ppo.batch_size``."""
+    mini-batches of ``ppo.batch_size``. RLlib takes the learning rate as a constant: the
+    sb3 path's linear decay (``lr_decay``) and its initial action noise
+    (``log_std_init``) are not mapped."""
 
-    train_batch: int = 2048  # = PpoConfig's n_steps × the sb3 default of 2 envs
+    train_batch: int = 2048  # env steps per iteration (RLlib has no n_steps × n_envs)
     env_runners: int = 2
     ppo: PpoConfig = field(default_factory=PpoConfig)
 
