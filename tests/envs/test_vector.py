@@ -57,9 +57,10 @@ def test_make_vec_defaults_to_the_worker_vector_env() -> None:
 
 
 @pytest.mark.parametrize(("num_envs", "workers", "kwargs"), [
-    (2, None, {}),                                  # one worker per env (2 CPUs)
+    (2, None, {}),                                  # this process + one worker (2 CPUs)
     (3, 2, {"track": "oval", "max_laps": 1}),       # uneven slices: 2 + 1 envs
-    (2, 1, {}),                                     # in this process
+    (5, 3, {"max_laps": 1}),                        # 2 + 1 + 2 envs, two workers
+    (2, 1, {}),                                     # all in this process
     (2, 2, {"observation": "dict", "obstacles": True}),  # images through shared memory
 ])
 def test_rollouts_equal_sync_vector_env(num_envs: int, workers: int | None,
@@ -96,7 +97,9 @@ def test_a_bad_action_raises_the_envs_error_and_the_env_goes_on() -> None:
     try:
         venv.reset(seed=0)
         with pytest.raises(ValueError, match="finite"):
-            venv.step(np.array([[0.0], [np.nan]], np.float32))
+            venv.step(np.array([[0.0], [np.nan]], np.float32))  # env 1: in the worker
+        with pytest.raises(ValueError, match="finite"):
+            venv.step(np.array([[np.nan], [0.0]], np.float32))  # env 0: in this process
         with pytest.raises(ValueError, match="one action per env"):
             venv.step(np.zeros((3, 1), np.float32))
         obs, *_ = venv.step(np.zeros((2, 1), np.float32))  # the pipes stayed in step
@@ -127,6 +130,7 @@ def test_call_and_close() -> None:
     frames = venv.call("camera_frame")
     assert len(frames) == 2 and frames[0].shape == (480, 752)
     procs = list(venv._procs)
+    assert len(procs) == 1  # env 0 in this process, env 1 in the worker
     venv.close()
     assert all(not p.is_alive() for p in procs)
     with pytest.raises(RuntimeError, match="closed"):
@@ -152,8 +156,8 @@ def test_a_dead_worker_is_a_clear_error() -> None:
     procs = list(venv._procs)
     try:
         venv.reset(seed=0)
-        venv._procs[1].kill()
-        venv._procs[1].join()
+        venv._procs[0].kill()
+        venv._procs[0].join()
         with pytest.raises(RuntimeError, match="died"):
             venv.step(np.zeros((2, 1), np.float32))
             venv.step(np.zeros((2, 1), np.float32))
