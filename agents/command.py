@@ -130,8 +130,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
 
 
 MAX_N_ENVS: int = 64
-"""Most training envs: each SubprocVecEnv worker holds a renderer and a scene (hundreds
-of MB); more than this is a typo, not a training set-up."""
+"""Most training envs: each env holds a renderer and a scene (hundreds of MB); more than
+this is a typo, not a training set-up."""
 
 MAX_ENV_RUNNERS: int = 4096
 """Most RLlib env runners (a cluster's CPUs): more is a typo."""

@@ -12,12 +12,9 @@ from __future__ import annotations
 
 import contextlib
 import json
-import multiprocessing
 import os
 import platform
 import shutil
-import signal
-import sys
 import tempfile
 import time
 from dataclasses import asdict, dataclass
@@ -71,23 +68,6 @@ OUT_FILES: tuple[str, ...] = ("policy.zip", "train.json", "tb/", "checkpoints/")
 """What ``train`` writes into its ``out`` folder (folders end in ``/``)."""
 
 
-def _make_env(**kwargs: Any) -> Any:
-    """One training env through the registered id: Gymnasium's TimeLimit ends episodes
-    after MAX_EPISODE_STEPS (without it a good policy drives one track forever). In a
-    SubprocVecEnv worker Ctrl-C is ignored: the parent stops the training and closes the
-    workers (a worker interrupted mid-step would only print a traceback)."""
-    import gymnasium
-
-    if multiprocessing.parent_process() is not None:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        # The parallelism is the workers': OpenCV's own thread pool (a thread per core in
-        # every worker) would oversubscribe the cores.
-        import cv2
-
-        cv2.setNumThreads(1)
-    return gymnasium.make("tfalda_sim:TfaldaTrack-v0", **kwargs)
-
-
 def _progress_callback(total: int) -> Any:
     """A tqdm progress bar as an SB3 callback (SB3's own needs rich, which we do not
     depend on)."""
@@ -113,18 +93,6 @@ def _progress_callback(total: int) -> Any:
                 self.bar.close()
 
     return TqdmCallback()
-
-
-def _stop_workers(venv: Any) -> None:
-    """End a vector env after a Ctrl-C or an error without its polite close(): a Ctrl-C
-    can cut a pipe message in half, and close() would then wait forever for the rest."""
-    for proc in getattr(venv, "processes", ()):
-        proc.terminate()
-    for proc in getattr(venv, "processes", ()):
-        proc.join(timeout=10)
-    if not getattr(venv, "processes", None):
-        venv.close()  # DummyVecEnv: nothing to cut, close it normally
-    venv.closed = True
 
 
 def _publish_run(staging: Path, out: Path) -> None:
@@ -169,27 +137,30 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
     The run is written to a staging folder beside ``out`` and moved into ``out`` when it
     ends: an error leaves ``out`` as it was. A Ctrl-C ends the training early and keeps
     the policy so far (``summary["interrupted"]``, ``summary["timesteps_done"]``)."""
+    import cv2
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
-    from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    from .vec_env import make_sb3_vec_env
 
     cfg = config or PpoConfig()
     out = Path(out)
     # One torch thread (restored at the end): during rollouts the env workers hold the
     # cores, and a 64-64 MLP's minibatch updates gain nothing from a second one.
-    threads = torch.get_num_threads()
+    threads, cv2_threads = torch.get_num_threads(), cv2.getNumThreads()
     torch.set_num_threads(1)
+    cv2.setNumThreads(1)  # this process steps envs too (the vector env's first slice)
     # Staged in the nearest existing folder (same file system, so the final moves are
     # renames): a failed or early-interrupted run creates no folder at all.
     staging = Path(tempfile.mkdtemp(prefix=".tfalda-sim-", suffix=".tmp",
                                     dir=_existing_ancestor(out)))
     shield = contextlib.ExitStack()  # after a Ctrl-C: ignore the next while saving
     try:
-        vec_cls = SubprocVecEnv if subprocess and n_envs > 1 else DummyVecEnv
-        venv = make_vec_env(_make_env, n_envs=n_envs, seed=seed, vec_env_cls=vec_cls,
-                            env_kwargs=env_kwargs(speed_m_s, track=track, camera=camera))
+        # TfaldaTrackVectorEnv through SB3's VecEnv API: this process steps the first
+        # slice of envs, a worker per further core the others (agents/vec_env.py).
+        venv = make_sb3_vec_env(n_envs, seed, workers=None if subprocess else 1,
+                                **env_kwargs(speed_m_s, track=track, camera=camera))
         interrupted = False
         try:
             lr = cfg.learning_rate
@@ -223,10 +194,9 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
             elapsed = time.perf_counter() - t0
             model.save(staging / "policy.zip")
         finally:
-            if interrupted or sys.exc_info()[0] is not None:
-                _stop_workers(venv)
-            else:
-                venv.close()
+            # Also after a Ctrl-C: the workers ignore it, and a worker that a cut message
+            # leaves waiting is terminated after 5 s (TfaldaTrackVectorEnv.close).
+            venv.close()
         summary = _summary(timesteps, n_envs, seed, speed_m_s, track, cfg, elapsed, out,
                            camera)
         summary.update(interrupted=interrupted, timesteps_done=int(model.num_timesteps),
@@ -237,6 +207,7 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
         shutil.rmtree(staging, ignore_errors=True)
         shield.close()
         torch.set_num_threads(threads)
+        cv2.setNumThreads(cv2_threads)
     return summary
 
 

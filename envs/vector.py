@@ -11,10 +11,10 @@ worker and step, not per env; a parent that only waited would leave its core idl
 2-env batch ran at 0.95–1.0× one env). OpenCV runs single-threaded in the workers (the
 parallelism is the processes'), observations travel through shared memory, the waits
 poll briefly before they block (``WAIT_SPIN_S``), and the parent merges the infos as
-flat columns. Everything else is Gymnasium's semantics:
-``AutoresetMode.NEXT_STEP``, seeds ``seed + i`` for env ``i``, the infos of
-``SyncVectorEnv`` (``key`` and ``_key`` arrays); a rollout equals ``SyncVectorEnv``'s bit for
-bit. With one env, or one CPU, every env runs in this process.
+flat columns. Everything else is Gymnasium's semantics: ``AutoresetMode.NEXT_STEP`` (or
+``SAME_STEP``, as SB3 needs), seeds ``seed + i`` for env ``i``, the infos of
+``SyncVectorEnv`` (``key`` and ``_key`` arrays); a rollout equals ``SyncVectorEnv``'s bit
+for bit. With one env, or one CPU, every env runs in this process.
 
 Workers ignore Ctrl-C (the parent closes them) and die with the parent (Linux
 ``PR_SET_PDEATHSIG``), like the sweep workers of ``tfalda_sim.parallel``.
@@ -69,27 +69,41 @@ class TfaldaTrackVectorEnv(VectorEnv):
     ``TfaldaTrackEnv``'s.
 
     ``reset(seed=s)`` seeds env ``i`` with ``s + i`` (a list gives one seed per env);
-    ``options`` go to every env. Autoreset: ``NEXT_STEP`` (the step after an episode
-    ended resets that env and returns its first observation with reward 0)."""
+    ``options`` go to every env. ``autoreset_mode``: ``NEXT_STEP`` (the step after an
+    episode ended resets that env and returns its first observation with reward 0) or
+    ``SAME_STEP`` (an episode's last step resets it and returns the new episode's first
+    observation; the last one is in ``info["final_obs"]``, its info in
+    ``info["final_info"]``)."""
 
     metadata: ClassVar[dict[str, Any]] = {"autoreset_mode": AutoresetMode.NEXT_STEP,
                                           "render_modes": ["rgb_array"]}
 
     def __init__(self, num_envs: int = 1, *, workers: int | None = None,
-                 max_episode_steps: int = MAX_EPISODE_STEPS, **env_kwargs: Any) -> None:
+                 max_episode_steps: int = MAX_EPISODE_STEPS,
+                 autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+                 **env_kwargs: Any) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer) or (
                 num_envs < 1):
             raise ValueError(f"num_envs must be an int ≥ 1, got {num_envs!r}")
         if workers is not None and (isinstance(workers, bool) or not isinstance(
                 workers, int | np.integer) or workers < 1):
             raise ValueError(f"workers must be None or an int ≥ 1, got {workers!r}")
+        try:
+            mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            mode = None
+        if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+            raise ValueError(f"autoreset_mode must be {AutoresetMode.NEXT_STEP.value!r} or "
+                             f"{AutoresetMode.SAME_STEP.value!r}, got {autoreset_mode!r}")
+        self.autoreset_mode = mode
         self.num_envs = int(num_envs)
         self._kwargs = {**env_kwargs, "max_episode_steps": max_episode_steps}
         probe = gym.make(ENV_ID, **self._kwargs)  # checks the arguments here, not in a worker
         self.single_observation_space = probe.observation_space
         self.single_action_space = probe.action_space
         self.render_mode = probe.render_mode
-        self.metadata = {**self.metadata, "render_fps": probe.metadata["render_fps"]}
+        self.metadata = {**self.metadata, "render_fps": probe.metadata["render_fps"],
+                         "autoreset_mode": mode}
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         lanes = min(self.num_envs, workers if workers is not None else available_cpus())
@@ -205,27 +219,66 @@ class TfaldaTrackVectorEnv(VectorEnv):
             raise ValueError(f"actions must have shape {self.action_space.shape} (one action "
                              f"per env), got {acts.shape}")
         space, buffer = self.single_observation_space, self._observations
+        same_step = self.autoreset_mode is AutoresetMode.SAME_STEP
         results = self._run(
-            "step", list(zip(self._per_lane(acts), self._per_lane(self._autoreset),
-                             strict=True)),
+            "step", [(a, r, same_step) for a, r in zip(
+                self._per_lane(acts), self._per_lane(self._autoreset), strict=True)],
             lambda data: _step_envs(self._local, space, buffer, 0, *data))
         rewards = np.array([r[0] for r in results], dtype=np.float64)
         terminated = np.array([r[1] for r in results], dtype=np.bool_)
         truncated = np.array([r[2] for r in results], dtype=np.bool_)
-        self._autoreset = terminated | truncated
+        if not same_step:
+            self._autoreset = terminated | truncated
         return (_copy(self._observations), rewards, terminated, truncated,
                 _merge_infos([r[3] for r in results]))
 
     def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
         """``getattr(env, name)(*args, **kwargs)`` on every env (or the attribute's value if
         it is not callable), in env order."""
+        return self.call_on(range(self.num_envs), name, *args, **kwargs)
+
+    def call_on(self, indices: Sequence[int], name: str, *args: Any, **kwargs: Any
+                ) -> tuple[Any, ...]:
+        """``call`` on the envs ``indices`` only, their answers in that order."""
         self._check_open()
-        request = (name, args, kwargs)
-        return tuple(self._run("call", [request] * (len(self._slices) - 1),
-                               lambda _: [_call(env, *request) for env in self._local]))
+        chosen = [int(i) for i in indices]
+        if any(not 0 <= i < self.num_envs for i in chosen):
+            raise ValueError(f"indices must lie in [0, {self.num_envs}), got {indices!r}")
+        mask = np.zeros(self.num_envs, np.bool_)
+        mask[chosen] = True
+        answers = self._run("call", [(name, args, kwargs, m) for m in self._per_lane(mask)],
+                            lambda data: _call_envs(self._local, *data))
+        return tuple(answers[i] for i in chosen)
 
     def get_attr(self, name: str) -> tuple[Any, ...]:
         return self.call(name)
+
+    def set_attr(self, name: str, values: Any, *,
+                 indices: Sequence[int] | None = None) -> None:
+        """``setattr(env, name, value)`` on every env (``SyncVectorEnv.set_attr``), or on
+        the envs ``indices``: one value for all of them, or a list or tuple of one each."""
+        self._check_open()
+        chosen = list(range(self.num_envs)) if indices is None else [int(i) for i in indices]
+        if any(not 0 <= i < self.num_envs for i in chosen):
+            raise ValueError(f"indices must lie in [0, {self.num_envs}), got {indices!r}")
+        if not isinstance(values, list | tuple):
+            values = [values] * len(chosen)
+        if len(values) != len(chosen):
+            raise ValueError(f"set_attr needs one value per env ({len(chosen)}), got "
+                             f"{len(values)}")
+        per_env: list[Any] = [None] * self.num_envs
+        mask = np.zeros(self.num_envs, np.bool_)
+        for i, value in zip(chosen, values, strict=True):
+            per_env[i], mask[i] = value, True
+        self._run("set", [(name, v, m) for v, m in zip(
+            self._per_lane(per_env), self._per_lane(mask), strict=True)],
+                  lambda data: _set(self._local, *data))
+
+    def is_wrapped(self, wrapper: type[gym.Wrapper]) -> tuple[bool, ...]:
+        """Whether each env is wrapped in ``wrapper`` (anywhere in its wrapper chain)."""
+        self._check_open()
+        return tuple(self._run("wrapped", [wrapper] * (len(self._slices) - 1),
+                               lambda cls: [_wrapped(env, cls) for env in self._local]))
 
     def render(self) -> tuple[Any, ...] | None:
         return self.call("render")
@@ -288,10 +341,10 @@ def _copy(batch: Any) -> Any:
 
 
 def _step_envs(envs: list[gym.Env], space: gym.Space, buffer: Any, start: int,
-               actions: np.ndarray, autoreset: np.ndarray
+               actions: np.ndarray, autoreset: np.ndarray, same_step: bool
                ) -> list[tuple[float, bool, bool, dict[str, Any]]]:
     """``envs`` (envs ``start``… of the batch) stepped, their observations in ``buffer``."""
-    return [_step_one(env, space, buffer, start + i, actions[i], bool(autoreset[i]))
+    return [_step_one(env, space, buffer, start + i, actions[i], bool(autoreset[i]), same_step)
             for i, env in enumerate(envs)]
 
 
@@ -308,13 +361,21 @@ def _reset_envs(envs: list[gym.Env], space: gym.Space, buffer: Any, start: int,
 
 
 def _step_one(env: gym.Env, space: gym.Space, buffer: Any, index: int, action: np.ndarray,
-              autoreset: bool) -> tuple[float, bool, bool, dict[str, Any]]:
-    """One env's step with NEXT_STEP autoreset, its observation written to ``buffer``."""
+              autoreset: bool, same_step: bool = False
+              ) -> tuple[float, bool, bool, dict[str, Any]]:
+    """One env's step, its observation written to ``buffer``. NEXT_STEP autoreset: a
+    step with ``autoreset`` resets instead; SAME_STEP (``same_step``): an episode's last
+    step resets at once, the info being ``SyncVectorEnv``'s (``final_obs``,
+    ``final_info``, then the reset's info)."""
     if autoreset:
         obs, info = env.reset()
         reward, terminated, truncated = 0.0, False, False
     else:
         obs, reward, terminated, truncated, info = env.step(action)
+        if same_step and (terminated or truncated):
+            final_obs, final_info = obs, info
+            obs, info = env.reset()
+            info = {"final_obs": final_obs, "final_info": final_info, **info}
     _write(space, buffer, index, obs)
     return float(reward), bool(terminated), bool(truncated), info
 
@@ -322,6 +383,29 @@ def _step_one(env: gym.Env, space: gym.Space, buffer: Any, index: int, action: n
 def _call(env: gym.Env, name: str, args: tuple, kwargs: dict[str, Any]) -> Any:
     attr = env.get_wrapper_attr(name)
     return attr(*args, **kwargs) if callable(attr) else attr
+
+
+def _call_envs(envs: list[gym.Env], name: str, args: tuple, kwargs: dict[str, Any],
+               mask: np.ndarray) -> list[Any]:
+    """``_call`` on the envs marked in ``mask`` (None for the others)."""
+    return [_call(env, name, args, kwargs) if chosen else None
+            for env, chosen in zip(envs, mask, strict=True)]
+
+
+def _set(envs: list[gym.Env], name: str, values: Sequence[Any], mask: np.ndarray
+         ) -> list[None]:
+    for env, value, chosen in zip(envs, values, mask, strict=True):
+        if chosen:
+            setattr(env, name, value)
+    return [None] * len(envs)
+
+
+def _wrapped(env: gym.Env, wrapper: type[gym.Wrapper]) -> bool:
+    while isinstance(env, gym.Wrapper):
+        if isinstance(env, wrapper):
+            return True
+        env = env.env
+    return False
 
 
 def _merge_infos(infos: list[dict[str, Any]]) -> dict[str, Any]:
@@ -335,6 +419,13 @@ def _merge_infos(infos: list[dict[str, Any]]) -> dict[str, Any]:
     all_present = np.ones(n, dtype=np.bool_)
     for key in keys:
         values = [info.get(key, _MISSING) for info in infos]
+        if key == "final_obs":  # SyncVectorEnv keeps the final observations as objects
+            merged[key] = np.full(n, fill_value=None, dtype=object)
+            for i, v in enumerate(values):
+                if v is not _MISSING:
+                    merged[key][i] = v
+            merged[f"_{key}"] = np.array([v is not _MISSING for v in values], np.bool_)
+            continue
         kind = type(values[0])
         if kind in (int, float, bool) and all(type(v) is kind for v in values):
             # The common case in one call: every env has the key, a plain scalar.
@@ -399,8 +490,11 @@ def _worker(conn: Connection, shm: Any, space: gym.Space,
                 elif command == "reset":
                     answer = _reset_envs(envs, space, buffer, start, *data)
                 elif command == "call":
-                    name, args, kw = data
-                    answer = [_call(env, name, args, kw) for env in envs]
+                    answer = _call_envs(envs, *data)
+                elif command == "set":
+                    answer = _set(envs, *data)
+                elif command == "wrapped":
+                    answer = [_wrapped(env, data) for env in envs]
                 elif command == "close":
                     break
                 else:

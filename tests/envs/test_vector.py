@@ -35,6 +35,10 @@ def assert_same(a: Any, b: Any) -> None:
         assert a.keys() == b.keys()
         for key in a:
             assert_same(a[key], b[key])
+    elif isinstance(a, np.ndarray) and a.dtype == object:  # final_obs
+        assert isinstance(b, np.ndarray) and b.dtype == object and a.shape == b.shape
+        for x, y in zip(a, b, strict=True):
+            assert (x is None and y is None) or assert_same(x, y) is None
     elif isinstance(a, tuple | list):
         assert len(a) == len(b)
         for x, y in zip(a, b, strict=True):
@@ -62,12 +66,17 @@ def test_make_vec_defaults_to_the_worker_vector_env() -> None:
     (5, 3, {"max_laps": 1}),                        # 2 + 1 + 2 envs, two workers
     (2, 1, {}),                                     # all in this process
     (2, 2, {"observation": "dict", "obstacles": True}),  # images through shared memory
+    (2, None, {"autoreset_mode": AutoresetMode.SAME_STEP}),  # final_obs, final_info
+    (3, 2, {"autoreset_mode": "SameStep", "max_laps": 1}),
 ])
 def test_rollouts_equal_sync_vector_env(num_envs: int, workers: int | None,
                                         kwargs: dict[str, Any]) -> None:
     ours = rollout(TfaldaTrackVectorEnv(num_envs, workers=workers, **kwargs), seed=5)
+    kwargs = dict(kwargs)
+    mode = kwargs.pop("autoreset_mode", AutoresetMode.NEXT_STEP)
     sync = rollout(gym.make_vec("TfaldaTrack-v0", num_envs=num_envs,
-                                vectorization_mode="sync", **kwargs), seed=5)
+                                vectorization_mode="sync",
+                                vector_kwargs={"autoreset_mode": mode}, **kwargs), seed=5)
     assert_same(ours, sync)
     # The rollout did reset some env on its own (else autoreset went untested).
     assert any(np.any(step[2] | step[3]) for step in ours[2:])
@@ -115,6 +124,10 @@ def test_bad_arguments_fail_before_any_worker_starts() -> None:
         TfaldaTrackVectorEnv(0)
     with pytest.raises(ValueError, match="workers"):
         TfaldaTrackVectorEnv(2, workers=0)
+    with pytest.raises(ValueError, match="autoreset_mode must be"):
+        TfaldaTrackVectorEnv(2, autoreset_mode="Disabled")
+    with pytest.raises(ValueError, match="autoreset_mode must be"):
+        TfaldaTrackVectorEnv(2, autoreset_mode="whenever")
     venv = TfaldaTrackVectorEnv(2)
     try:
         with pytest.raises(ValueError, match="one seed per env"):
