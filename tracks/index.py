@@ -70,17 +70,25 @@ def _centre_samples(x0: np.ndarray, y0: np.ndarray, h0: np.ndarray, kappa: np.nd
 
 
 @njit(cache=True)
-def _cell_pairs(xs: np.ndarray, ys: np.ndarray, segs: np.ndarray, gx0: float, gy0: float,
-                cell_m: float, nx: int, ny: int, span: int, reach: float, n_seg: int
-                ) -> np.ndarray:
-    """Sorted unique ``cell · (n_seg + 1) + segment`` codes of every (sample, cell) pair
-    whose cell square lies within ``reach`` of the sample."""
+def _cell_items(xs: np.ndarray, ys: np.ndarray, segs: np.ndarray, gx0: float, gy0: float,
+                cell_m: float, nx: int, ny: int, span: int, reach: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The grid's ``cell_start`` and ``items``: every segment of a sample whose cell square
+    lies within ``reach`` of the sample, once per cell, a cell's segments in increasing
+    order. The samples come segment by segment (``_centre_samples``), so a pair repeats
+    only right after itself (``last`` drops it) and a counting sort by cell keeps the
+    segments' order: no sort of all (sample, cell) pairs."""
+    n_cells = nx * ny
+    last = np.full(n_cells, -1, np.int64)
     side = 2 * span + 1
-    codes = np.empty(len(xs) * side * side, np.int64)
+    pair_cell = np.empty(len(xs) * side * side, np.int64)
+    pair_seg = np.empty(len(xs) * side * side, np.int64)
     n = 0
+    r2 = reach * reach
     for k in range(len(xs)):
         sx = xs[k]
         sy = ys[k]
+        seg = segs[k]
         ci = np.int64(math.floor((sx - gx0) / cell_m))
         cj = np.int64(math.floor((sy - gy0) / cell_m))
         for oi in range(-span, span + 1):
@@ -91,10 +99,26 @@ def _cell_pairs(xs: np.ndarray, ys: np.ndarray, segs: np.ndarray, gx0: float, gy
                 jj = cj + oj
                 cy_lo = gy0 + jj * cell_m
                 dy = max(0.0, max(cy_lo - sy, sy - cy_lo - cell_m))
-                if dx * dx + dy * dy <= reach * reach and 0 <= ii < nx and 0 <= jj < ny:
-                    codes[n] = (jj * nx + ii) * (n_seg + 1) + segs[k]
+                if dx * dx + dy * dy <= r2 and 0 <= ii < nx and 0 <= jj < ny:
+                    c = jj * nx + ii
+                    if last[c] == seg:
+                        continue
+                    last[c] = seg
+                    pair_cell[n] = c
+                    pair_seg[n] = seg
                     n += 1
-    return np.unique(codes[:n])
+    cell_start = np.zeros(n_cells + 1, np.int64)
+    for q in range(n):
+        cell_start[pair_cell[q] + 1] += 1
+    for c in range(n_cells):
+        cell_start[c + 1] += cell_start[c]
+    fill = cell_start[:-1].copy()
+    items = np.empty(n, np.int64)
+    for q in range(n):
+        c = pair_cell[q]
+        items[fill[c]] = pair_seg[q]
+        fill[c] += 1
+    return cell_start, items
 
 
 def build_index(table: SegmentTable, half_road_m: float, cell_m: float = CELL_M) -> GridIndex:
@@ -107,13 +131,8 @@ def build_index(table: SegmentTable, half_road_m: float, cell_m: float = CELL_M)
     nx = int(math.ceil((xs_a.max() + reach + cell_m - gx0) / cell_m)) + 1
     ny = int(math.ceil((ys_a.max() + reach + cell_m - gy0) / cell_m)) + 1
     span = int(math.ceil(reach / cell_m)) + 1
-    n_seg = len(table.length)
-    pairs = _cell_pairs(xs_a, ys_a, seg_a, float(gx0), float(gy0), float(cell_m), nx, ny,
-                        span, float(reach), n_seg)
-    cell_of = pairs // (n_seg + 1)
-    items = (pairs % (n_seg + 1)).astype(np.int64)
-    counts = np.bincount(cell_of, minlength=nx * ny)
-    cell_start = np.concatenate(([0], np.cumsum(counts))).astype(np.int64)
+    cell_start, items = _cell_items(xs_a, ys_a, seg_a, float(gx0), float(gy0), float(cell_m),
+                                    nx, ny, span, float(reach))
     return GridIndex(float(gx0), float(gy0), float(cell_m), nx, ny, cell_start, items)
 
 

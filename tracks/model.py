@@ -331,12 +331,39 @@ class Track:
         return s, self.position(s)
 
     def bounds(self, margin_m: float = 0.0) -> tuple[float, float, float, float]:
-        """Bounding box ``(xmin, ymin, xmax, ymax)`` [m] of the road plus ``margin_m``."""
-        _, pts = self.sample(0.02)
+        """Bounding box ``(xmin, ymin, xmax, ymax)`` [m] of the road plus ``margin_m``:
+        the extremes of the centre-line points every 2 cm (``sample(0.02)``), ± the half
+        road, the margin and 1 cm. Only the samples that can hold an extreme are computed
+        (``_extreme_samples``): the same numbers, a tenth of the work."""
+        pts = self.position(self._extreme_samples(0.02))
         pad = self.half_road_m + margin_m + 0.01
         lo = pts.min(axis=0) - pad
         hi = pts.max(axis=0) + pad
         return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
+
+    def _extreme_samples(self, step_m: float) -> np.ndarray:
+        """The arc lengths of ``sample(step_m)`` near a segment's ends and near the points
+        of an arc heading along an axis (±3 samples): the extremes of the sampled x and y
+        lie among them. (Along a segment the computed x and y are monotone between those
+        points: rounding is monotone, and next to an extreme adjacent samples differ by
+        far more than rounding.)"""
+        total = self.length_m
+        n = max(2, math.ceil(total / step_m))
+        s = np.linspace(0.0, total, n + 1)
+        if self.closed:
+            s = s[:-1]
+        t = self.table
+        delta = total / n
+        marks = [t.s0, t.s0 + t.length]
+        for j in np.flatnonzero(t.kappa != 0.0):
+            h0 = float(t.h0[j])
+            h1 = h0 + float(t.kappa[j] * t.length[j])
+            quarter = 0.5 * math.pi
+            m = np.arange(math.floor(min(h0, h1) / quarter), math.ceil(max(h0, h1) / quarter) + 1)
+            marks.append(t.s0[j] + (m * quarter - h0) / t.kappa[j])
+        centre = np.rint(np.concatenate(marks) / delta).astype(np.int64)
+        idx = np.unique(np.clip((centre[:, None] + np.arange(-3, 4)).ravel(), 0, len(s) - 1))
+        return s[idx]
 
     # ----------------------------------------------------------- reverse query
     @cached_property

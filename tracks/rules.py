@@ -115,39 +115,61 @@ def _close_approaches(
     n_seg = len(length)
     mid_x = np.empty(n_seg)
     mid_y = np.empty(n_seg)
+    reach = np.empty(n_seg)
     for j in range(n_seg):
         mid_x[j], mid_y[j], _ = pose_at(x0[j], y0[j], h0[j], kappa[j], 0.5 * length[j])
+        reach[j] = 0.5 * length[j] + clearance_m + _PREFILTER_MARGIN_M
+    # The pieces of a segment left after cutting out the three windows (at most 4: each
+    # window splits one piece at most), in two small arrays instead of lists.
+    lo_a = np.empty(8)
+    hi_a = np.empty(8)
+    lo_b = np.empty(8)
+    hi_b = np.empty(8)
+    shifts = (-total, 0.0, total) if closed else (0.0, 0.0, 0.0)
     for i in range(samples.shape[0]):
         si = samples[i, 0]
         px = samples[i, 1]
         py = samples[i, 2]
         for j in range(n_seg):
-            if math.hypot(px - mid_x[j], py - mid_y[j]) > (0.5 * length[j] + clearance_m
-                                                          + _PREFILTER_MARGIN_M):
+            if math.hypot(px - mid_x[j], py - mid_y[j]) > reach[j]:
                 continue
-            pieces = [(s0[j], s0[j] + length[j])]
-            shifts = (-total, 0.0, total) if closed else (0.0, 0.0, 0.0)
+            lo_a[0] = s0[j]
+            hi_a[0] = s0[j] + length[j]
+            n_p = 1
             for k in range(3):
                 wlo = si - exclude_m + shifts[k]
                 whi = si + exclude_m + shifts[k]
-                cut = [(0.0, 0.0)]
-                cut.pop()
-                for lo, hi in pieces:
+                m = 0
+                for q in range(n_p):
+                    lo = lo_a[q]
+                    hi = hi_a[q]
                     if whi <= lo or wlo >= hi:
-                        cut.append((lo, hi))
+                        lo_b[m] = lo
+                        hi_b[m] = hi
+                        m += 1
                     else:
                         if lo < wlo:
-                            cut.append((lo, wlo))
+                            lo_b[m] = lo
+                            hi_b[m] = wlo
+                            m += 1
                         if whi < hi:
-                            cut.append((whi, hi))
-                pieces = cut
-            best = (math.inf, 0.0)
-            for lo, hi in pieces:
-                u, _, dist = project(x0[j], y0[j], h0[j], kappa[j], lo - s0[j], hi - s0[j], px, py)
-                if dist < best[0]:
-                    best = (dist, s0[j] + u)
-            if best[0] < clearance_m:
-                hits.append((si, best[1], best[0]))
+                            lo_b[m] = whi
+                            hi_b[m] = hi
+                            m += 1
+                for q in range(m):
+                    lo_a[q] = lo_b[q]
+                    hi_a[q] = hi_b[q]
+                n_p = m
+            best_d = math.inf
+            best_s = 0.0
+            for q in range(n_p):
+                u, _, dist = project(x0[j], y0[j], h0[j], kappa[j], lo_a[q] - s0[j],
+                                     hi_a[q] - s0[j], px, py)
+                if dist < best_d:
+                    best_d = dist
+                    best_s = s0[j] + u
+            if best_d < clearance_m:
+                hits.append((si, best_s, best_d))
     return hits
 
 

@@ -175,3 +175,36 @@ def test_tracks_with_the_same_road_share_their_index() -> None:
     assert generate(4).index is not track.index
     x, y = track.position(1.0, -0.2)
     assert bare.locate(float(x), float(y)) == track.locate(float(x), float(y))
+
+
+@pytest.mark.parametrize("seed", [0, 5, 17, 123])
+def test_index_cells_hold_exactly_the_segments_within_reach(seed: int) -> None:
+    """Every cell lists, once and in increasing order, each segment with a centre sample
+    within reach of the cell's square (a plain numpy reference over all pairs)."""
+    from tfalda_sim.tracks.index import _SAMPLE_STEP_M, EXTRA_REACH_M, _centre_samples
+
+    track = generated(seed)
+    t, index = track.table, track.index
+    reach = track.half_road_m + EXTRA_REACH_M + _SAMPLE_STEP_M
+    xs, ys, segs = _centre_samples(t.x0, t.y0, t.h0, t.kappa, t.length, _SAMPLE_STEP_M)
+    cells = np.arange(index.nx * index.ny)
+    lo_x = index.x0 + (cells % index.nx) * index.cell_m
+    lo_y = index.y0 + (cells // index.nx) * index.cell_m
+    for c in cells:
+        dx = np.maximum(0.0, np.maximum(lo_x[c] - xs, xs - lo_x[c] - index.cell_m))
+        dy = np.maximum(0.0, np.maximum(lo_y[c] - ys, ys - lo_y[c] - index.cell_m))
+        want = np.unique(segs[dx * dx + dy * dy <= reach * reach])
+        got = index.items[index.cell_start[c]:index.cell_start[c + 1]]
+        assert np.array_equal(got, want), c
+
+
+@pytest.mark.parametrize("seed", [0, 3, 42, 999])
+def test_bounds_are_the_extremes_of_the_2_cm_samples(seed: int) -> None:
+    """``bounds`` computes only the samples that can hold an extreme: the same numbers as
+    all of ``sample(0.02)``."""
+    track = generated(seed)
+    _, pts = track.sample(0.02)
+    pad = track.half_road_m + 0.3 + 0.01
+    want = (pts[:, 0].min() - pad, pts[:, 1].min() - pad,
+            pts[:, 0].max() + pad, pts[:, 1].max() + pad)
+    assert track.bounds(0.3) == tuple(float(v) for v in want)

@@ -34,8 +34,11 @@ class BoxFaces:
     @classmethod
     def of(cls, boxes: np.ndarray) -> BoxFaces:
         """Faces of boxes ``(n, 8, 3)``: corners 0–3 on the ground, 4–7 above them."""
-        quads = np.array([(4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)])
         boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 8, 3)
+        if not len(boxes):  # no cartons (the env's default): the same empty arrays, at once
+            return cls(np.zeros((0, 5, 4 * OBSTACLE_EDGE_STEPS, 3)), np.zeros((0, 5, 3)),
+                       np.zeros((0, 5, 3)), np.zeros((0, 3)), np.zeros((0, 5)))
+        quads = np.array([(4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)])
         pts = boxes[:, quads]  # (n, 5, 4, 3)
         t = np.linspace(0.0, 1.0, OBSTACLE_EDGE_STEPS, endpoint=False)[None, None, None, :, None]
         nxt = np.roll(pts, -1, axis=2)
