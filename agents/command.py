@@ -226,8 +226,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     summary = train(args.timesteps, args.n_envs, args.seed, args.out, speed_m_s=args.speed,
                     progress=not args.json, camera=args.camera)
     print(json.dumps(summary) if args.json else
-          f"trained {summary['timesteps_done']} steps in {summary['train_time_s']:.0f} s → "
-          f"{args.out / 'policy.zip'}")
+          f"trained {summary['timesteps_done']} steps in {summary['train_time_s']:.0f} s "
+          f"({summary['steps_per_s'] or 0:.0f} steps/s) → {args.out / 'policy.zip'}")
     if summary["interrupted"]:
         return interrupted(f"stopped after {summary['timesteps_done']} of {args.timesteps} "
                            f"steps; kept the policy so far ({args.out / 'policy.zip'}), "

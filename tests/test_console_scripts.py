@@ -408,6 +408,16 @@ def test_train_json(tmp_path: Path) -> None:
     assert _assert_trained(tmp_path / "out" / "tr")["timesteps_done"] == doc["timesteps_done"]
 
 
+def test_train_with_two_envs_spawns_a_worker_from_the_script(tmp_path: Path) -> None:
+    """Two envs: this process steps one, a spawned worker the other (the worker imports
+    the console script's main module)."""
+    pytest.importorskip("stable_baselines3", reason="train needs the rl extra")
+    doc = tfalda("train", "--timesteps", "64", "--n-envs", "2", "--out", "out/tr", "--json",
+                 cwd=tmp_path).json()
+    assert doc["n_envs"] == 2 and doc["timesteps_done"] >= 64 and doc["steps_per_s"] > 0
+    _assert_trained(tmp_path / "out" / "tr")
+
+
 def test_train_with_a_camera(tmp_path: Path) -> None:
     doc = _train(tmp_path, "--camera", "reference-car", "--json").json()
     assert doc["camera"] == "reference-car" and "--camera reference-car" in doc["command"]
@@ -417,7 +427,7 @@ def test_train_with_a_camera(tmp_path: Path) -> None:
 def test_train_with_progress_bar(tmp_path: Path) -> None:
     """Without --json the progress bar runs: the path that needed SB3's tqdm+rich extra."""
     run = _train(tmp_path)
-    assert "trained" in run.out and "policy.zip" in run.out, str(run)
+    assert "trained" in run.out and "steps/s" in run.out and "policy.zip" in run.out, str(run)
     assert "100%" in run.err, str(run)  # the bar reached its end
     _assert_trained(tmp_path / "out" / "tr")
 

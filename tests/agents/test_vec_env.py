@@ -77,8 +77,9 @@ def test_rollout_equals_sb3_dummy_vec_env(workers: int | None) -> None:
     assert ends and all("episode" in info for info in ends)
 
 
-def test_ppo_trains_the_same_policy_as_on_sb3s_vec_env() -> None:
+def test_ppo_trains_the_same_policy_as_on_sb3s_vec_env(tmp_path, monkeypatch) -> None:
     torch = pytest.importorskip("torch")
+    monkeypatch.setenv("SB3_LOGDIR", str(tmp_path))  # SB3's logger folder, else in /tmp
     from stable_baselines3 import PPO
 
     def params(venv: Any) -> list[Any]:
