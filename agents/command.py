@@ -354,7 +354,8 @@ def cmd_stress(args: argparse.Namespace) -> int:
                 tally.add(run)
 
             end = run_sweep(spec, backend, keep, resume=resume, progress=not args.json,
-                            results=None if args.results is None else outs.path(args.results),
+                            results=None if args.results is None else outs.journal(
+                                args.results, keep_on_abort=args.resume),
                             desc="stress", unit="run")
         rows = tally.rows()
         if not rows:
@@ -446,7 +447,8 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
     runs: list[dict[str, Any]] = []
     with Outputs() as outs:
         end = run_sweep(spec, backend, runs.append, resume=resume, progress=not args.json,
-                        results=None if args.results is None else outs.path(args.results),
+                        results=None if args.results is None else outs.journal(
+                            args.results, keep_on_abort=args.resume),
                         desc=args.agent, unit="run")
         if not runs:
             outs.abort()

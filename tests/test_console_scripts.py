@@ -433,6 +433,42 @@ def test_train_with_progress_bar(tmp_path: Path) -> None:
 
 
 # --------------------------------------------------------------------------- sweeps on Ray
+def test_a_killed_sweep_leaves_its_journal_and_resumes_from_it(tmp_path: Path) -> None:
+    """SIGKILL (no chance to clean up) once some tracks are in the journal: r.jsonl.partial
+    stays with them; a fresh run over it is refused; --resume continues it (after a line
+    cut mid-write) to the results and report of an uninterrupted run."""
+    if SCRIPT is None:
+        pytest.fail("no tfalda-sim console script")
+    sweep = ("evaluate", "--scenario", "random", "--seeds", "0:8", "--max-frames", "25",
+             "--json", "--workers", "2")
+    proc = subprocess.Popen([SCRIPT, *sweep, "--results", "r.jsonl"], cwd=tmp_path,
+                            env=_child_env(), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    journal = tmp_path / "r.jsonl.partial"
+    deadline = time.monotonic() + TIMEOUT_S
+    while time.monotonic() < deadline and proc.poll() is None:
+        if journal.exists() and len(journal.read_text().splitlines()) >= 3:  # header + 2
+            break
+        time.sleep(0.05)
+    proc.kill()
+    proc.wait(timeout=TIMEOUT_S)
+    kept = journal.read_text().splitlines()
+    assert 3 <= len(kept) < 9 and not (tmp_path / "r.jsonl").exists(), kept
+    refused = tfalda(*sweep, "--results", "r.jsonl", cwd=tmp_path, code=2)
+    assert "--resume continues it" in refused.err, str(refused)
+    with journal.open("a") as fh:
+        fh.write('{"seed": 7, "ru')  # a write the kill cut off
+    resumed = tfalda(*sweep, "--results", "r.jsonl", "--resume", cwd=tmp_path)
+    assert "continuing from" in resumed.err and "dropped the incomplete last" in resumed.err
+    assert not journal.exists()
+    assert (tmp_path / "r.jsonl").read_text().splitlines()[:len(kept)] == kept
+    whole = tfalda(*sweep, "--results", "whole.jsonl", cwd=tmp_path).json()
+    assert _without_timings(resumed.json()) == _without_timings(whole)
+    assert ([_without_timings(json.loads(x)) for x in (tmp_path / "r.jsonl").read_text()
+             .splitlines()] == [_without_timings(json.loads(x)) for x in
+                                (tmp_path / "whole.jsonl").read_text().splitlines()])
+
+
 def _without_timings(obj: Any) -> Any:
     """``obj`` without wall-clock figures (they differ between any two runs)."""
     if isinstance(obj, dict):
@@ -458,8 +494,8 @@ def test_a_sweep_on_ray_stopped_by_ctrl_c_resumes_to_the_uninterrupted_result(
                             preexec_fn=_default_sigint)
     deadline = time.monotonic() + TIMEOUT_S
     while time.monotonic() < deadline and proc.poll() is None:
-        staged = list(tmp_path.glob(".tfalda-sim-*.tmp.jsonl"))
-        if staged and len(staged[0].read_text().splitlines()) >= 3:  # header + 2 tracks
+        journal = tmp_path / "r.jsonl.partial"
+        if journal.exists() and len(journal.read_text().splitlines()) >= 3:  # header + 2
             break
         time.sleep(0.1)
     proc.send_signal(signal.SIGINT)

@@ -13,6 +13,7 @@ import argparse
 import contextlib
 import json
 import math
+import shutil
 import signal
 import sys
 from collections import deque
@@ -22,7 +23,7 @@ from pathlib import Path
 from typing import Any, Generic, TypeVar
 
 from .interrupts import INTERRUPTS, ignoring_stops, is_interrupt, last_stop_signal
-from .outputs import DIRECTORY, Output, OutputError
+from .outputs import DIRECTORY, Output, OutputError, journal_of
 from .outputs import check_outputs as _check_outputs
 from .parallel import BACKENDS, Backend, RayUnavailable, WorkerDied, import_ray, resolve_workers
 
@@ -291,7 +292,8 @@ def add_sweep_options(parser: argparse.ArgumentParser, what: str = "jobs") -> No
                              "local Ray with --workers CPUs for this sweep)")
     parser.add_argument("--results", type=Path, metavar="F.jsonl",
                         help="stream each finished job's result to this JSON Lines file (first "
-                             "line: the sweep's configuration), so --resume can continue it")
+                             "line: the sweep's configuration), so --resume can continue it; "
+                             "it grows as F.jsonl.partial until the sweep ends")
     parser.add_argument("--resume", action="store_true",
                         help="continue the interrupted sweep in --results: its finished jobs "
                              "are kept, not redone (same options needed; the report files "
@@ -310,6 +312,11 @@ def check_sweep_options(args: argparse.Namespace) -> None:
     if args.resume and getattr(args, "force", False):
         error("--resume continues --results and replaces the report it had; --force starts "
               "afresh over it: give one of them")
+    journal = None if args.results is None else journal_of(args.results)
+    if (journal is not None and not args.resume and not getattr(args, "force", False)
+            and (journal.exists() or journal.is_symlink())):
+        error(f"{journal} holds the finished jobs of a sweep that was stopped before it "
+              "ended (killed?): --resume continues it, --force starts afresh over it")
 
 
 def sweep_backend(args: argparse.Namespace, jobs: int) -> Backend[Any, Any]:
@@ -360,25 +367,65 @@ def _show(value: Any) -> str:
     return "(not given)" if value is None else json.dumps(value)
 
 
-def read_results(path: Path, spec: SweepSpec[Any]) -> Iterator[tuple[int, dict[str, Any]]]:
-    """The records of a results file as (line number, record), after checking its header
-    against ``spec`` now (``CliError`` naming the mismatch). An incomplete last line (a
+class ResumedResults:
+    """The records of a results journal as ``(line number, record)`` (``read_results``);
+    ``valid_end`` is the byte length of the header and the records read so far, where
+    ``run_sweep`` appends the next one (cutting off an incomplete last line)."""
+
+    def __init__(self, path: Path, fh: Any, spec_path: Path, header_bytes: int) -> None:
+        self.path = path
+        self._fh = fh
+        self._shown = spec_path
+        self.valid_end = header_bytes
+
+    def __iter__(self) -> Iterator[tuple[int, dict[str, Any]]]:
+        with self._fh as fh:
+            for n, raw in enumerate(fh, start=2):
+                try:
+                    rec = json.loads(raw.decode("utf-8"))
+                except (ValueError, UnicodeDecodeError):
+                    if not raw.endswith(b"\n"):  # the last line, cut off mid-write
+                        print(f"note: --resume: dropped the incomplete last line {n} of "
+                              f"{self._shown}; its job runs again", file=sys.stderr)
+                        return
+                    raise CliError(f"--resume: {self._shown} line {n} is not JSON: the file "
+                                   "is damaged; start afresh without --resume") from None
+                if not isinstance(rec, dict) or not raw.endswith(b"\n"):
+                    if isinstance(rec, dict):  # complete JSON, cut before its newline
+                        print(f"note: --resume: dropped the incomplete last line {n} of "
+                              f"{self._shown}; its job runs again", file=sys.stderr)
+                        return
+                    raise CliError(f"--resume: {self._shown} line {n} is not a result "
+                                   "record; start afresh without --resume")
+                self.valid_end += len(raw)
+                yield n, rec
+
+
+def read_results(path: Path, spec: SweepSpec[Any]) -> ResumedResults:
+    """The records of the results of an interrupted sweep, after checking its header
+    against ``spec`` now (``CliError`` naming the mismatch). They are read from the
+    journal ``journal_of(path)`` if a killed sweep left one (it holds every finished
+    job), else from ``path``, copied to the journal first: the resumed sweep appends its
+    jobs to the journal, so a kill never loses what was there. An incomplete last line (a
     write cut off) is dropped with a note: its job runs again; any other bad line is an
     error naming it."""
-    if not path.is_file():
+    journal = journal_of(path)
+    source = journal if journal.is_file() else path
+    if not source.is_file():
         raise CliError(f"--resume: {path} is not a file (nothing to resume); run without "
                        "--resume to start the sweep")
     try:
-        fh = open(path, "rb")  # closed by the generator below (or on an error here)
+        fh = open(source, "rb")  # closed by ResumedResults (or on an error here)
     except OSError as exc:
-        raise CliError(f"--resume: cannot read {path}: {exc.strerror or exc}") from None
+        raise CliError(f"--resume: cannot read {source}: {exc.strerror or exc}") from None
+    first = fh.readline()
     try:
-        head = json.loads(fh.readline().decode("utf-8"))
+        head = json.loads(first.decode("utf-8"))
     except (ValueError, UnicodeDecodeError):
         head = None
     if not isinstance(head, dict) or not isinstance(head.get(SWEEP_HEADER_KEY), str):
         fh.close()
-        raise CliError(f"--resume: {path} does not start with a sweep header: it is not a "
+        raise CliError(f"--resume: {source} does not start with a sweep header: it is not a "
                        "--results file of tfalda-sim; start afresh without --resume")
     problems = []
     if head[SWEEP_HEADER_KEY] != spec.command:
@@ -396,28 +443,22 @@ def read_results(path: Path, spec: SweepSpec[Any]) -> Iterator[tuple[int, dict[s
                                 f"now {_show(ours.get(key))}")
     if problems:
         fh.close()
-        raise CliError(f"--resume: {path} is from another sweep: {'; '.join(problems)}. "
+        raise CliError(f"--resume: {source} is from another sweep: {'; '.join(problems)}. "
                        "Give the options it was started with, or start afresh without "
                        "--resume")
-
-    def records() -> Iterator[tuple[int, dict[str, Any]]]:
-        with fh:
-            for n, raw in enumerate(fh, start=2):
-                try:
-                    rec = json.loads(raw.decode("utf-8"))
-                except (ValueError, UnicodeDecodeError):
-                    if not raw.endswith(b"\n"):  # the last line, cut off mid-write
-                        print(f"note: --resume: dropped the incomplete last line {n} of "
-                              f"{path}; its job runs again", file=sys.stderr)
-                        return
-                    raise CliError(f"--resume: {path} line {n} is not JSON: the file is "
-                                   "damaged; start afresh without --resume") from None
-                if not isinstance(rec, dict):
-                    raise CliError(f"--resume: {path} line {n} is not a result record; "
-                                   "start afresh without --resume")
-                yield n, rec
-
-    return records()
+    if source == journal:
+        print(f"note: --resume: continuing from {journal}, which a sweep stopped before "
+              "its end left", file=sys.stderr)
+    else:
+        fh.close()
+        try:
+            shutil.copyfile(path, journal)
+            fh = open(journal, "rb")
+            fh.readline()
+        except OSError as exc:
+            raise CliError(f"--resume: cannot copy {path} to {journal}: "
+                           f"{exc.strerror or exc}") from None
+    return ResumedResults(journal, fh, source, len(first))
 
 
 _END = object()
@@ -425,16 +466,20 @@ _END = object()
 
 def run_sweep(spec: SweepSpec[J], backend: Backend[Any, Any],
               handle: Callable[[dict[str, Any]], None], *, results: Path | None = None,
-              resume: Iterator[tuple[int, dict[str, Any]]] | None = None,
+              resume: ResumedResults | None = None,
               progress: bool = True, desc: str = "jobs", unit: str = "job",
               on_result: Callable[[J, Any], None] | None = None) -> SweepEnd:
     """Run a sweep: the records of ``resume`` (``read_results``) first, in place of the
     jobs they finished, then the remaining jobs on ``backend``. Every record (JSON
     round-tripped, so a resumed sweep sees exactly what an uninterrupted one does) goes
-    to ``handle`` and, with the header first, to ``results`` (a path to write, e.g. a
-    staged temporary file), flushed at once; a fresh result also to ``on_result`` (side
-    outputs that need more than the record). A tqdm bar counts finished jobs. Returns how
-    the sweep ended (``consume``)."""
+    to ``handle``; ``results`` (the journal, ``Outputs.journal``) gets the header and
+    every fresh record, flushed at once — with ``resume`` it is ``resume.path`` and the
+    fresh records go after the resumed ones. A fresh result also goes to ``on_result``
+    (side outputs that need more than the record). A tqdm bar counts finished jobs.
+    Returns how the sweep ended (``consume``)."""
+    if resume is not None and results is not None and resume.path != results:
+        raise ValueError(f"a resumed sweep appends to its journal {resume.path}, not to "
+                         f"{results}")
     jobs = iter(spec.jobs)
     in_flight: deque[J] = deque()  # the jobs handed to the backend, oldest first
 
@@ -460,10 +505,24 @@ def run_sweep(spec: SweepSpec[J], backend: Backend[Any, Any],
             yield job, line, json.loads(line), result, 0
 
     with contextlib.ExitStack() as stack:
-        fh = stack.enter_context(open(results, "w", encoding="utf-8")) if results else None
-        if fh is not None:
-            fh.write(json.dumps(spec.header()) + "\n")
-            fh.flush()
+        fh = None
+
+        def journal() -> Any:
+            """The results journal, opened where the next record goes."""
+            nonlocal fh
+            if fh is None and results is not None:
+                if resume is None:
+                    fh = stack.enter_context(open(results, "wb"))
+                    fh.write((json.dumps(spec.header()) + "\n").encode("utf-8"))
+                    fh.flush()
+                else:  # after the resumed records (an incomplete last line cut off)
+                    fh = stack.enter_context(open(results, "r+b"))
+                    fh.seek(resume.valid_end)
+                    fh.truncate()
+            return fh
+
+        if resume is None:
+            journal()
         bar = stack.enter_context(_tqdm(total=spec.total, desc=desc, unit=unit,
                                         disable=not progress))
 
@@ -476,15 +535,18 @@ def run_sweep(spec: SweepSpec[J], backend: Backend[Any, Any],
                     raise
                 raise CliError(f"--resume: line {n} is not a valid result ({exc}); the file "
                                "is not this sweep's results") from None
-            if fh is not None:
-                fh.write(line + "\n")
+            if n == 0 and journal() is not None:  # a fresh result (resumed: there already)
+                fh.write((line + "\n").encode("utf-8"))
                 fh.flush()  # a finished job is on disk at once
             if result is not None and on_result is not None:
                 on_result(job, result)
             bar.update()
 
         try:
-            return consume(items(), keep)
+            end = consume(items(), keep)
+            if not end.early:
+                journal()  # all resumed: still cut off an incomplete last line
+            return end
         except RayUnavailable as exc:  # Ray starts with the first job: bad input, not a bug
             raise CliError(str(exc)) from None
 

@@ -13,6 +13,11 @@ Every ``tfalda-sim`` command that writes files follows the same rules:
    command leaves the disk as it found it.
 3. **Ctrl-C keeps what was finished.** A command interrupted by Ctrl-C commits what it
    had (the video so far, the results so far) and says so (see ``tfalda_sim.cli``).
+4. **A journal survives a kill.** A sweep's ``--results`` file grows under a fixed name
+   beside it (``Outputs.journal``: ``F.jsonl.partial``), a line per finished job, and
+   becomes the file itself when the command ends; a process killed outright (SIGKILL,
+   the OOM killer, a power cut after the flush) leaves the journal, which ``--resume``
+   continues.
 """
 
 from __future__ import annotations
@@ -29,6 +34,15 @@ from tfalda_sim.fileio import publish
 
 DIRECTORY = "/"
 """The ``suffix`` of an output that is a folder (``stress --out DIR``)."""
+
+JOURNAL_SUFFIX = ".partial"
+"""What a journal's name adds to its target's (``Outputs.journal``)."""
+
+
+def journal_of(target: str | os.PathLike[str]) -> Path:
+    """Where ``target`` grows as a journal while its command runs (``F.jsonl.partial``)."""
+    target = Path(target)
+    return target.with_name(target.name + JOURNAL_SUFFIX)
 
 
 class OutputError(ValueError):
@@ -163,6 +177,7 @@ class Outputs:
 
     def __init__(self) -> None:
         self._staged: dict[Path, Path] = {}
+        self._kept: set[Path] = set()
         self._made_dirs: list[Path] = []
         self.written: list[Path] = []
 
@@ -187,6 +202,18 @@ class Outputs:
         self._staged[target] = tmp
         return tmp
 
+    def journal(self, target: str | os.PathLike[str], *, keep_on_abort: bool = False) -> Path:
+        """The fixed path ``target`` grows at (``journal_of``), published as ``target`` by
+        ``commit``. ``abort`` removes it, unless ``keep_on_abort`` (a resumed journal:
+        it held finished jobs before this command, and holds more now)."""
+        target = Path(target)
+        self._makedirs(target.parent)
+        tmp = journal_of(target)
+        self._staged[target] = tmp
+        if keep_on_abort:
+            self._kept.add(tmp)
+        return tmp
+
     def commit(self) -> list[Path]:
         """Put every written temporary file in place; returns the targets written (a
         target whose temporary file was never created is skipped). Every target is
@@ -201,14 +228,17 @@ class Outputs:
                 publish(tmp, target)
                 self.written.append(target)
         self._staged.clear()
+        self._kept.clear()
         self._made_dirs.clear()
         return list(self.written)
 
     def abort(self) -> None:
         """Remove the temporary files and the folders this command created."""
         for tmp in self._staged.values():
-            tmp.unlink(missing_ok=True)
+            if tmp not in self._kept:
+                tmp.unlink(missing_ok=True)
         self._staged.clear()
+        self._kept.clear()
         for d in reversed(self._made_dirs):
             try:
                 d.rmdir()

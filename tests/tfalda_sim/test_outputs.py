@@ -173,3 +173,25 @@ def test_a_name_too_long_for_the_file_system_is_refused_first(tmp_path: Path) ->
         check_outputs([Output("--plot", tmp_path / ("a" * 300 + ".png"), ".png")], force=True)
     # a long name that fits still passes, its temporary name too (short, fixed length)
     check_outputs([Output("--plot", tmp_path / ("a" * 248 + ".png"), ".png")], force=True)
+
+
+def test_a_journal_grows_under_a_fixed_name_and_becomes_its_target(tmp_path: Path) -> None:
+    from tfalda_sim.outputs import journal_of
+
+    target = tmp_path / "sub" / "r.jsonl"
+    outs = Outputs()
+    journal = outs.journal(target)
+    assert journal == journal_of(target) == tmp_path / "sub" / "r.jsonl.partial"
+    journal.write_text("header\n")
+    assert outs.commit() == [target] and target.read_text() == "header\n"
+    assert not journal.exists()
+
+
+@pytest.mark.parametrize("resumed", [False, True])
+def test_an_aborted_journal_goes_unless_it_was_resumed(tmp_path: Path, resumed: bool) -> None:
+    target = tmp_path / "r.jsonl"
+    with pytest.raises(RuntimeError), Outputs() as outs:
+        outs.journal(target, keep_on_abort=resumed).write_text("header\nrecord\n")
+        raise RuntimeError("a job failed")
+    assert (tmp_path / "r.jsonl.partial").exists() is resumed
+    assert not target.exists()

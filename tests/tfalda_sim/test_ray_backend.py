@@ -26,7 +26,7 @@ import pytest
 import ray  # the ray extra: installed by `make install` and CI, so never skipped
 
 from tfalda_sim.cli import main
-from tfalda_sim.cli_common import SweepSpec, read_results
+from tfalda_sim.cli_common import SweepSpec, read_results, run_sweep
 from tfalda_sim.parallel import IN_FLIGHT_PER_WORKER, Backend, ray_stream
 
 TIMING = {"detector_ms_median", "ms_per_frame_median", "ms_per_frame_p95", "times",
@@ -207,6 +207,34 @@ def test_reading_refuses_another_sweeps_file(tmp_path: Path, lines: list[str],
     path = _file(tmp_path, [json.dumps(header[x]) if x in header else x for x in lines])
     with pytest.raises(CliError, match="--resume: .*" + message.replace("(", r"\(")):
         list(read_results(path, spec))
+
+
+def test_resuming_reads_the_journal_and_appends_after_its_last_whole_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A killed sweep's journal (r.jsonl.partial, its last line cut mid-write) is what
+    --resume reads; the resumed sweep cuts the broken line and appends the rest there."""
+    head = json.dumps(_spec().header())
+    journal = tmp_path / "r.jsonl.partial"
+    journal.write_text(f'{head}\n{{"x": 0}}\n{{"x": 1}}\n{{"x": 2, "ha')
+    (tmp_path / "r.jsonl").write_text(f'{head}\n{{"x": 0}}\n')  # older: not read
+    resume = read_results(tmp_path / "r.jsonl", _spec())
+    assert resume.path == journal
+    seen: list[dict[str, Any]] = []
+    end = run_sweep(_spec(), Backend("local", 1), seen.append, results=journal,
+                    resume=resume, progress=False)
+    assert not end.early and seen == [{"x": x} for x in range(5)]
+    assert journal.read_text() == head + "\n" + "".join(f'{{"x": {x}}}\n' for x in range(5))
+    err = capsys.readouterr().err
+    assert "continuing from" in err and "dropped the incomplete last line 4" in err
+
+
+def test_resuming_a_results_file_copies_it_to_the_journal_first(tmp_path: Path) -> None:
+    head = json.dumps(_spec().header())
+    results = _file(tmp_path, [head, '{"x": 0}'])
+    resume = read_results(results, _spec())
+    assert resume.path == tmp_path / "r.jsonl.partial"
+    assert resume.path.read_text() == results.read_text()  # the file itself untouched
+    assert [rec for _, rec in resume] == [{"x": 0}]
 
 
 def test_a_damaged_middle_line_is_an_error_naming_it(tmp_path: Path) -> None:

@@ -343,7 +343,8 @@ def _evaluate_seeds(args: argparse.Namespace, configs: Mapping[str, DetectorConf
             fh.flush()  # a finished track is on disk at once
 
         end = run_sweep(spec, backend, keep, resume=resume, progress=progress,
-                        results=None if args.results is None else outs.path(args.results),
+                        results=None if args.results is None else outs.journal(
+                            args.results, keep_on_abort=args.resume),
                         desc="tracks", unit="track", on_result=frames)
     out["seeds"] = [args.seeds.start, args.seeds.stop]
     out["tracks_done"] = len(per_seed) // len(configs)
@@ -586,7 +587,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
                 fh.flush()  # a finished scenario is on disk at once
 
         end = run_sweep(spec, backend, keep, resume=resume, progress=progress,
-                        results=None if args.results is None else outs.path(args.results),
+                        results=None if args.results is None else outs.journal(
+                            args.results, keep_on_abort=args.resume),
                         desc="scenarios", unit="scenario")
         stack.close()
         if not tally.jobs:
