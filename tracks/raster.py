@@ -237,6 +237,7 @@ def _raster_kernel(
     for sx in passes:
         special.append(sx)
     special_reach = half_road + stop_w + 0.5 * start_w + 2.0 * res
+    spans = np.empty((6, 2), np.int64)  # a row's column spans [lo, hi] (empty: lo > hi)
     for j in range(len(length)):
         n_chunks = max(1, int(math.ceil(length[j] / chunk_m)))
         ch = math.cos(h0[j])
@@ -282,31 +283,40 @@ def _raster_kernel(
             for r in range(r_lo, r_hi + 1):
                 tile_row = todo[r // tile]
                 py = oy - (r + 0.5) * res
-                q_lo = c_lo
-                q_hi = c_hi
-                q_lo2 = 0
-                q_hi2 = -1
+                # The row's column spans that can hold a painted pixel: the whole road
+                # band where a crossing marking may be, else only the bands around the
+                # three lines (the per-pixel test below rejects everything else anyway).
+                n_sp = 0
                 if arc:
-                    q_lo, q_hi, q_lo2, q_hi2 = _arc_row_spans(
-                        py - cy, cx, ox, res, radius - pad - slack, radius + pad + slack, wedge,
-                        ax_, ay_, bx_, by_, sign, slack, c_lo, c_hi)
+                    for li in range(1 if has_special else 3):
+                        if has_special:
+                            r_in, r_out = radius - pad - slack, radius + pad + slack
+                        else:
+                            rc = radius - sign * (li - 1) * lane_w
+                            r_in, r_out = rc - line_reach - slack, rc + line_reach + slack
+                        a0, a1, b0, b1 = _arc_row_spans(
+                            py - cy, cx, ox, res, r_in, r_out, wedge, ax_, ay_, bx_, by_, sign,
+                            slack, c_lo, c_hi)
+                        spans[n_sp, 0], spans[n_sp, 1] = a0, a1
+                        spans[n_sp + 1, 0], spans[n_sp + 1, 1] = b0, b1
+                        n_sp += 2
                 else:
                     # u and d are linear in x along a row: clip the row to the chunk's band.
                     dy = py - y0[j]
-                    bands = ((ch, dy * sh, ua, ub), (-sh, dy * ch, -pad, pad))
-                    for coef, base, lo_v, hi_v in bands:
-                        # value(px) = coef * (px - x0) + base must lie in [lo_v, hi_v]
-                        if abs(coef) < 1e-12:
-                            if base < lo_v or base > hi_v:
-                                q_hi = -1
-                            continue
-                        xa_ = x0[j] + (lo_v - base) / coef
-                        xb_ = x0[j] + (hi_v - base) / coef
-                        q_lo = max(q_lo, int(math.floor((min(xa_, xb_) - ox) / res - 0.5)))
-                        q_hi = min(q_hi, int(math.ceil((max(xa_, xb_) - ox) / res - 0.5)))
-                for span in range(2):  # arcs: the annulus may cut the row in two
-                    q_run = q_lo if span == 0 else q_lo2
-                    span_hi = q_hi if span == 0 else q_hi2
+                    u_lo, u_hi = _linear_span(ch, dy * sh, ua, ub, x0[j], ox, res, c_lo, c_hi)
+                    for li in range(1 if has_special else 3):
+                        if has_special:
+                            d_lo, d_hi = -pad, pad
+                        else:
+                            dl = (li - 1) * lane_w
+                            d_lo, d_hi = dl - line_reach - res, dl + line_reach + res
+                        q0, q1 = _linear_span(-sh, dy * ch, d_lo, d_hi, x0[j], ox, res, u_lo,
+                                              u_hi)
+                        spans[n_sp, 0], spans[n_sp, 1] = q0, q1
+                        n_sp += 1
+                for span in range(n_sp):
+                    q_run = spans[span, 0]
+                    span_hi = spans[span, 1]
                     while q_run <= span_hi:  # the span's runs through one tile each
                         tc = q_run // tile
                         q_end = min(span_hi, (tc + 1) * tile - 1)
@@ -362,6 +372,21 @@ def _clip_half_plane(lo: float, hi: float, coef: float, rhs: float, cx: float,
     if coef > 0.0:
         return max(lo, cx + rhs / coef), hi
     return lo, min(hi, cx + rhs / coef)
+
+
+@njit(cache=True)
+def _linear_span(coef: float, base: float, lo_v: float, hi_v: float, x0: float, ox: float,
+                 res: float, q_lo: int, q_hi: int) -> tuple[int, int]:
+    """The columns ``q_lo … q_hi`` of a row whose pixel centres ``px`` can have
+    ``coef · (px − x0) + base`` in ``[lo_v, hi_v]`` (half a pixel of rounding room)."""
+    if abs(coef) < 1e-12:
+        if base < lo_v or base > hi_v:
+            return 0, -1
+        return q_lo, q_hi
+    xa = x0 + (lo_v - base) / coef
+    xb = x0 + (hi_v - base) / coef
+    return (max(q_lo, int(math.floor((min(xa, xb) - ox) / res - 0.5))),
+            min(q_hi, int(math.ceil((max(xa, xb) - ox) / res - 0.5))))
 
 
 @njit(cache=True)
