@@ -143,6 +143,28 @@ def test_tile_wise_raster_equals_whole_raster() -> None:
             np.testing.assert_array_equal(full.labels, whole.labels)
 
 
+def test_a_map_without_labels_paints_the_same_intensity() -> None:
+    """``labels=False`` (a scene's map) writes no labels and the same intensity, tile by
+    tile; it cannot become a MarkingMap."""
+    from tests.conftest import generated
+    from tfalda_sim.tracks.raster import TiledMarkingMap
+
+    rng = np.random.default_rng(1)
+    eight = next(generated(s) for s in range(100) if generated(s).intersections)
+    for track in (generated(4), eight, load_named("thesis")):
+        with_labels = TiledMarkingMap(track)
+        bare = TiledMarkingMap(track, labels=False)
+        assert bare.labels is None
+        for _ in range(3):
+            tiles = rng.random(bare.filled.shape) < 0.3
+            with_labels.fill(tiles)
+            bare.fill(tiles)
+        assert bare.intensity.any()
+        np.testing.assert_array_equal(bare.intensity, with_labels.intensity)
+        with pytest.raises(ValueError, match="labels=False"):
+            bare.fill_all()
+
+
 def test_tight_and_wide_arcs_are_painted_whole() -> None:
     """The arc chunks' row spans skip only pixels outside the road: a full circle of a
     tight, a medium and a wide radius paints its lines' whole area."""

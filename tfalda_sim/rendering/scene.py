@@ -441,7 +441,7 @@ def _marking_for(track: Track) -> TiledMarkingMap:
     an equal track (a new appearance on the same track repaints nothing)."""
     if _last_marking and (_last_marking[0].track is track or _last_marking[0].track == track):
         return _last_marking[0]
-    marking = TiledMarkingMap(track)
+    marking = TiledMarkingMap(track, labels=False)  # a scene reads only the intensity
     _last_marking[:] = [marking]
     return marking
 
