@@ -456,6 +456,24 @@ TILE_PX: int = 32
 demand."""
 
 
+def map_geometry(track: Track, resolution_m: float = DEFAULT_RESOLUTION_M,
+                 margin_m: float = dimensions.MAT_EDGE_MARGIN_M
+                 ) -> tuple[tuple[float, float], tuple[int, int]]:
+    """Where the marking map of ``track`` lies: the world ``(x, y)`` [m] of its top-left
+    corner and its ``(rows, cols)`` (at most ``MAX_MAP_PIXELS``)."""
+    if not (math.isfinite(resolution_m) and resolution_m > 0):
+        raise ValueError(f"resolution_m must be > 0, got {resolution_m!r}")
+    xmin, ymin, xmax, ymax = track.bounds(margin_m)
+    n_cols = int(math.ceil((xmax - xmin) / resolution_m))
+    n_rows = int(math.ceil((ymax - ymin) / resolution_m))
+    if n_cols * n_rows > MAX_MAP_PIXELS:
+        raise ValueError(f"a {n_cols}×{n_rows} map is too large (more than MAX_MAP_PIXELS = "
+                         f"{MAX_MAP_PIXELS}: {math.sqrt(MAX_MAP_PIXELS) * resolution_m:.0f} m "
+                         f"square at {resolution_m * 1000:g} mm/px); use a coarser "
+                         "resolution_m")
+    return (xmin, ymax), (n_rows, n_cols)
+
+
 class TiledMarkingMap:
     """A marking map painted tile by tile on demand (``fill``): a camera sees a few metres
     of a track, so painting only what it looks at makes a new track cheap to show.
@@ -469,24 +487,21 @@ class TiledMarkingMap:
 
     def __init__(self, track: Track, resolution_m: float = DEFAULT_RESOLUTION_M,
                  margin_m: float = dimensions.MAT_EDGE_MARGIN_M,
-                 tile_px: int = TILE_PX, *, labels: bool = True) -> None:
-        if not (math.isfinite(resolution_m) and resolution_m > 0):
-            raise ValueError(f"resolution_m must be > 0, got {resolution_m!r}")
+                 tile_px: int = TILE_PX, *, labels: bool = True,
+                 intensity: np.ndarray | None = None) -> None:
         if not (isinstance(tile_px, int) and tile_px > 0):
             raise ValueError(f"tile_px must be a positive int, got {tile_px!r}")
-        xmin, ymin, xmax, ymax = track.bounds(margin_m)
-        n_cols = int(math.ceil((xmax - xmin) / resolution_m))
-        n_rows = int(math.ceil((ymax - ymin) / resolution_m))
-        if n_cols * n_rows > MAX_MAP_PIXELS:
-            raise ValueError(f"a {n_cols}×{n_rows} map is too large (more than MAX_MAP_PIXELS = "
-                             f"{MAX_MAP_PIXELS}: {math.sqrt(MAX_MAP_PIXELS) * resolution_m:.0f} m "
-                             f"square at {resolution_m * 1000:g} mm/px); use a coarser "
-                             "resolution_m")
+        (xmin, ymax), (n_rows, n_cols) = map_geometry(track, resolution_m, margin_m)
+        if intensity is not None and (intensity.shape != (n_rows, n_cols)
+                                      or intensity.dtype != np.uint8):
+            raise ValueError(f"intensity must be uint8 of shape {(n_rows, n_cols)}, got "
+                             f"{intensity.dtype} {intensity.shape}")
         self.track = track
         self.origin_m = (xmin, ymax)
         self.resolution_m = float(resolution_m)
         self.tile_px = tile_px
-        self.intensity = untouched_zeros((n_rows, n_cols))
+        # ``intensity``: paint into this zero array instead (a scene's atlas level 0).
+        self.intensity = untouched_zeros((n_rows, n_cols)) if intensity is None else intensity
         self.labels = untouched_zeros((n_rows, n_cols)) if labels else None
         self.filled = np.zeros((-(-n_rows // tile_px), -(-n_cols // tile_px)), np.uint8)
         t = track.table

@@ -17,7 +17,13 @@ import numpy as np
 from numba import njit
 
 from tfalda_sim.tracks import MarkingMap, Track, rasterize
-from tfalda_sim.tracks.raster import TILE_PX, TiledMarkingMap, untouched_zeros
+from tfalda_sim.tracks.raster import (
+    DEFAULT_RESOLUTION_M,
+    TILE_PX,
+    TiledMarkingMap,
+    map_geometry,
+    untouched_zeros,
+)
 from tfalda_sim.tracks.rules import obstacle_corners
 
 from .effects import Effects
@@ -271,12 +277,20 @@ class MipTiles:
     average of the tiles of level L − 1 under it. Filled tiles hold exactly the eager
     atlas's texels; the rest of the atlas is untouched zeros (no memory). The wall
     texture is copied in row by row as views read it (the ROIs see no wall: every atlas
-    row written costs a page fault)."""
+    row written costs a page fault).
+
+    ``level0_in_atlas``: the marking map paints straight into the atlas's level 0 (its
+    ``intensity`` is a view of it: a scene without wear), so nothing is copied. A later
+    scene on the same track shares that map and copies from it."""
 
     def __init__(self, marking: TiledMarkingMap, atlas: np.ndarray, sizes: list[tuple[int, int]],
                  origins: list[tuple[int, int]], worn: np.ndarray | None,
-                 wall: np.ndarray, wall_origin: tuple[int, int]) -> None:
+                 wall: np.ndarray, wall_origin: tuple[int, int], *,
+                 level0_in_atlas: bool = False) -> None:
+        if level0_in_atlas and worn is not None:
+            raise ValueError("worn paint needs its own level 0 (intensity × wear)")
         self.marking = marking
+        self.level0_in_atlas = level0_in_atlas
         self.atlas = atlas
         self.wall = wall
         self.wall_origin = wall_origin
@@ -332,12 +346,13 @@ class MipTiles:
         g0 = self.grids[0]
         need0 = self.need[:g0[0] * g0[1]].reshape(g0[0], g0[1])
         self.marking.fill(need0)
-        use_wear = self._worn is not None
-        if use_wear and self._remaining is None:
-            self._remaining = _wear_remaining(self._worn, self.marking.shape)
-        remaining = self._remaining if use_wear else np.ones((1, 1), np.float32)
-        _store_level0(self.atlas, ATLAS_GUARD, self.marking.intensity, remaining, use_wear,
-                      need0, int(self.tile[0]))
+        if not self.level0_in_atlas:
+            use_wear = self._worn is not None
+            if use_wear and self._remaining is None:
+                self._remaining = _wear_remaining(self._worn, self.marking.shape)
+            remaining = self._remaining if use_wear else np.ones((1, 1), np.float32)
+            _store_level0(self.atlas, ATLAS_GUARD, self.marking.intensity, remaining,
+                          use_wear, need0, int(self.tile[0]))
         _mip_tiles(self.atlas, self.origins, self.need, self.sizes, self.tile, self.grids,
                    self.offsets)
         self.filled |= self.need
@@ -436,14 +451,12 @@ def _cached_wall_texture(rng: np.random.Generator, hall: Hall) -> np.ndarray:
     return hit[0]
 
 
-def _marking_for(track: Track) -> TiledMarkingMap:
-    """The lazily painted marking map of ``track``, shared with the last scene built on
-    an equal track (a new appearance on the same track repaints nothing)."""
+def _marking_for(track: Track) -> TiledMarkingMap | None:
+    """The lazily painted marking map of the last scene built on an equal track (a new
+    appearance on the same track repaints nothing), or None."""
     if _last_marking and (_last_marking[0].track is track or _last_marking[0].track == track):
         return _last_marking[0]
-    marking = TiledMarkingMap(track, labels=False)  # a scene reads only the intensity
-    _last_marking[:] = [marking]
-    return marking
+    return None
 
 
 def build_scene(track: Track, effects: Effects | None = None,
@@ -461,13 +474,27 @@ def build_scene(track: Track, effects: Effects | None = None,
     tiles = None
     if lazy and marking_map is None:
         marking = _marking_for(track)
-        shape, resolution_m, origin_m = marking.shape, marking.resolution_m, marking.origin_m
+        if marking is None:
+            origin_m, shape = map_geometry(track)
+            resolution_m = DEFAULT_RESOLUTION_M
+        else:
+            shape, resolution_m, origin_m = marking.shape, marking.resolution_m, marking.origin_m
         worn = _wear_noise(rng, shape, fx.wear) if fx.wear > 0 else None
         wall = _cached_wall_texture(rng, hall)
         (height, width), sizes, level_xy, wall_origin = _atlas_layout(shape, wall.shape)
         atlas = untouched_zeros((height, width))  # unfilled tiles and walls cost nothing
         origins = np.array(level_xy, np.float32)
-        tiles = MipTiles(marking, atlas, sizes, level_xy, worn, wall, wall_origin)
+        in_atlas = False
+        if marking is None:
+            # Without wear level 0 is the paint itself: painted straight into the atlas.
+            in_atlas = worn is None
+            g = ATLAS_GUARD
+            marking = TiledMarkingMap(
+                track, labels=False,  # a scene reads only the intensity
+                intensity=atlas[g:g + shape[0], g:g + shape[1]] if in_atlas else None)
+            _last_marking[:] = [marking]
+        tiles = MipTiles(marking, atlas, sizes, level_xy, worn, wall, wall_origin,
+                         level0_in_atlas=in_atlas)
     else:
         m = marking_map if marking_map is not None else rasterize(track)
         shape, resolution_m, origin_m = m.shape, m.resolution_m, m.origin_m

@@ -4,6 +4,7 @@ the renderer looks at them, and every frame equals the eager scene's bit for bit
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
 
 import cv2
 import numpy as np
@@ -256,3 +257,40 @@ def test_prepare_without_wall_rows_copies_every_wall_row() -> None:
     (wx, wy), (cols, rows) = eager.wall_origin, eager.wall_size
     np.testing.assert_array_equal(scene.atlas[wy:wy + rows, wx:wx + cols + 1],
                                   eager.atlas[wy:wy + rows, wx:wx + cols + 1])
+
+
+def test_a_scene_without_wear_paints_level_0_in_its_atlas() -> None:
+    scene = build_scene(generated(31), Effects.off())
+    assert scene.tiles.level0_in_atlas and scene.tiles.marking.labels is None
+    assert np.shares_memory(scene.tiles.marking.intensity, scene.atlas)
+    worn = build_scene(generated(32), replace(Effects(), wear=0.5), np.random.default_rng(1))
+    assert not worn.tiles.level0_in_atlas
+    assert not np.shares_memory(worn.tiles.marking.intensity, worn.atlas)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_scenes_sharing_a_marking_map_all_render_the_eager_frames(renderer: Renderer,
+                                                                   seed: int) -> None:
+    """Scenes built one after another on a few tracks (the same track again shares the
+    marking map painted into an earlier scene's atlas), with and without wear, some held
+    while newer ones are built: every view of each, old or new, equals its eager scene's."""
+    rng = np.random.default_rng(seed)
+    tracks = [generated(3), generated(7), load_named("oval")]
+    held: list[tuple[Any, Any]] = []
+    shared = 0
+    for _ in range(14):
+        track = tracks[int(rng.integers(len(tracks)))]
+        fx, scene_seed = _effects(("default", "off", "randomised")[int(rng.integers(3))],
+                                  int(rng.integers(100)))
+        lazy = build_scene(track, fx, np.random.default_rng(scene_seed))
+        eager = build_scene(track, fx, np.random.default_rng(scene_seed), lazy=False)
+        shared += any(lazy.tiles.marking is old.tiles.marking for old, _ in held)
+        held = [*held[-3:], (lazy, eager)]
+        for k in range(2):
+            got_scene, want_scene = held[int(rng.integers(len(held)))]
+            pose = _poses(got_scene.track, 1, int(rng.integers(1000)))[0]
+            for got, want in zip(renderer.render_windows(got_scene, pose, ROIS, frame_seed=k),
+                                 renderer.render_windows(want_scene, pose, ROIS, frame_seed=k),
+                                 strict=True):
+                np.testing.assert_array_equal(got, want)
+    assert shared  # some scene did reuse an earlier scene's marking map
