@@ -334,12 +334,17 @@ class Track:
         """Bounding box ``(xmin, ymin, xmax, ymax)`` [m] of the road plus ``margin_m``:
         the extremes of the centre-line points every 2 cm (``sample(0.02)``), ± the half
         road, the margin and 1 cm. Only the samples that can hold an extreme are computed
-        (``_extreme_samples``): the same numbers, a tenth of the work."""
-        pts = self.position(self._extreme_samples(0.02))
+        (``_extreme_samples``, once per track): the same numbers, a tenth of the work."""
+        lo, hi = self._centre_extremes
         pad = self.half_road_m + margin_m + 0.01
-        lo = pts.min(axis=0) - pad
-        hi = pts.max(axis=0) + pad
-        return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
+        return (float(lo[0] - pad), float(lo[1] - pad), float(hi[0] + pad),
+                float(hi[1] + pad))
+
+    @cached_property
+    def _centre_extremes(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(min, max)`` over x and y of the centre-line points every 2 cm [m]."""
+        pts = self.position(self._extreme_samples(0.02))
+        return pts.min(axis=0), pts.max(axis=0)
 
     def _extreme_samples(self, step_m: float) -> np.ndarray:
         """The arc lengths of ``sample(step_m)`` near a segment's ends and near the points
