@@ -83,10 +83,11 @@ class Sb3VectorEnv(VecEnv):
         self.venv.close()
 
     def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
-        return list(self.venv.call_on(list(self._get_indices(indices)), attr_name))
+        return list(self.venv.get_attr_on(list(self._get_indices(indices)), attr_name))
 
     def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
-        self.venv.set_attr(attr_name, value, indices=list(self._get_indices(indices)))
+        chosen = list(self._get_indices(indices))
+        self.venv.set_attr(attr_name, [value] * len(chosen), indices=chosen)  # as is, each
 
     def env_method(self, method_name: str, *method_args: Any, indices: Any = None,
                    **method_kwargs: Any) -> list[Any]:

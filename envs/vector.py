@@ -1,4 +1,5 @@
-"""``gymnasium.make_vec("TfaldaTrack-v0", num_envs=N)``: N envs stepped by worker processes.
+"""``gymnasium.make_vec("TfaldaTrack-v0", num_envs=N)``: N envs stepped in this process and
+by worker processes, one per core.
 
 Gymnasium's ``AsyncVectorEnv`` runs one process per env and talks to each through a pipe
 per step; on a 2-core machine two such envs ran *slower* than one (0.74×): every worker
@@ -140,27 +141,35 @@ class TfaldaTrackVectorEnv(VectorEnv):
     def _run(self, command: str, per_lane: Sequence[Any],
              local: Callable[[Any], list[Any]]) -> list[Any]:
         """``command`` on every lane, in env order: the workers get ``per_lane[1:]`` first,
-        this process runs ``local(per_lane[0])`` meanwhile. An error is raised after every
-        worker has answered, so the pipes stay in step."""
-        for w, (conn, data) in enumerate(zip(self._conns, per_lane[1:], strict=True)):
-            try:
-                conn.send((command, data))
-            except (BrokenPipeError, ConnectionError, OSError):
-                code = self._procs[w].exitcode
-                self.close()
-                raise RuntimeError(f"worker {w + 1} of the vector env died (exit code "
-                                   f"{code}); make a new one with gymnasium.make_vec"
-                                   ) from None
-        error: Exception | None = None
+        this process runs ``local(per_lane[0])`` meanwhile. Whatever happens here (an
+        error, a Ctrl-C in this process's own envs, a value that does not pickle), every
+        worker that got the command is heard before it is raised: the pipes stay in
+        step."""
+        sent = 0
         try:
+            for w, (conn, data) in enumerate(zip(self._conns, per_lane[1:], strict=True)):
+                try:
+                    conn.send((command, data))
+                except (BrokenPipeError, ConnectionError, OSError):
+                    code = self._procs[w].exitcode
+                    self.close()
+                    raise RuntimeError(f"worker {w + 1} of the vector env died (exit code "
+                                       f"{code}); make a new one with gymnasium.make_vec"
+                                       ) from None
+                sent += 1
             answers = local(per_lane[0])
-        except Exception as exc:  # raised once the workers have answered
-            answers, error = [], exc
+        except BaseException:
+            self._drain(sent)
+            raise
         for answer in self._gather(command):
             answers.extend(answer)
-        if error is not None:
-            raise error
         return answers
+
+    def _drain(self, n: int) -> None:
+        """Read and drop the answers of the first ``n`` workers (after an error here)."""
+        for conn in self._conns[:n]:
+            with contextlib.suppress(EOFError, ConnectionError, OSError):
+                _receive(conn, WAIT_SPIN_S)
 
     def _gather(self, command: str) -> list[Any]:
         """Every worker's answer; a worker's error raised here (after all have answered, so
@@ -240,13 +249,23 @@ class TfaldaTrackVectorEnv(VectorEnv):
     def call_on(self, indices: Sequence[int], name: str, *args: Any, **kwargs: Any
                 ) -> tuple[Any, ...]:
         """``call`` on the envs ``indices`` only, their answers in that order."""
+        return self._call_on(indices, name, args, kwargs, invoke=True)
+
+    def get_attr_on(self, indices: Sequence[int], name: str) -> tuple[Any, ...]:
+        """The attribute ``name`` of the envs ``indices`` as it is (a method is not
+        called, unlike ``get_attr``, which is ``SyncVectorEnv``'s)."""
+        return self._call_on(indices, name, (), {}, invoke=False)
+
+    def _call_on(self, indices: Sequence[int], name: str, args: tuple, kwargs: dict[str, Any],
+                 *, invoke: bool) -> tuple[Any, ...]:
         self._check_open()
         chosen = [int(i) for i in indices]
         if any(not 0 <= i < self.num_envs for i in chosen):
             raise ValueError(f"indices must lie in [0, {self.num_envs}), got {indices!r}")
         mask = np.zeros(self.num_envs, np.bool_)
         mask[chosen] = True
-        answers = self._run("call", [(name, args, kwargs, m) for m in self._per_lane(mask)],
+        answers = self._run("call", [(name, args, kwargs, m, invoke)
+                                     for m in self._per_lane(mask)],
                             lambda data: _call_envs(self._local, *data))
         return tuple(answers[i] for i in chosen)
 
@@ -255,8 +274,9 @@ class TfaldaTrackVectorEnv(VectorEnv):
 
     def set_attr(self, name: str, values: Any, *,
                  indices: Sequence[int] | None = None) -> None:
-        """``setattr(env, name, value)`` on every env (``SyncVectorEnv.set_attr``), or on
-        the envs ``indices``: one value for all of them, or a list or tuple of one each."""
+        """``env.set_wrapper_attr(name, value)`` on every env (``SyncVectorEnv.set_attr``),
+        or on the envs ``indices``: one value for all of them, or a list or tuple of one
+        each."""
         self._check_open()
         chosen = list(range(self.num_envs)) if indices is None else [int(i) for i in indices]
         if any(not 0 <= i < self.num_envs for i in chosen):
@@ -386,17 +406,18 @@ def _call(env: gym.Env, name: str, args: tuple, kwargs: dict[str, Any]) -> Any:
 
 
 def _call_envs(envs: list[gym.Env], name: str, args: tuple, kwargs: dict[str, Any],
-               mask: np.ndarray) -> list[Any]:
-    """``_call`` on the envs marked in ``mask`` (None for the others)."""
-    return [_call(env, name, args, kwargs) if chosen else None
-            for env, chosen in zip(envs, mask, strict=True)]
+               mask: np.ndarray, invoke: bool) -> list[Any]:
+    """``_call`` on the envs marked in ``mask`` (None for the others); without
+    ``invoke`` the attribute itself."""
+    return [(_call(env, name, args, kwargs) if invoke else env.get_wrapper_attr(name))
+            if chosen else None for env, chosen in zip(envs, mask, strict=True)]
 
 
 def _set(envs: list[gym.Env], name: str, values: Sequence[Any], mask: np.ndarray
          ) -> list[None]:
     for env, value, chosen in zip(envs, values, mask, strict=True):
         if chosen:
-            setattr(env, name, value)
+            env.set_wrapper_attr(name, value)
     return [None] * len(envs)
 
 

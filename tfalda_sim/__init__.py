@@ -21,8 +21,8 @@ def register_envs() -> None:
     import gymnasium
 
     if ENV_ID not in gymnasium.registry:
-        # vector_entry_point: make_vec without a vectorization_mode steps the envs in worker
-        # processes that scale with the cores (tfalda_sim.envs.vector).
+        # vector_entry_point: make_vec without a vectorization_mode steps the envs in this
+        # process and a worker process per further core (tfalda_sim.envs.vector).
         gymnasium.register(id=ENV_ID, entry_point="tfalda_sim.envs.tfalda_track:TfaldaTrackEnv",
                            vector_entry_point="tfalda_sim.envs.vector:make_vector_env",
                            max_episode_steps=MAX_EPISODE_STEPS)

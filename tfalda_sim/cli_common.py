@@ -13,6 +13,7 @@ import argparse
 import contextlib
 import json
 import math
+import os
 import shutil
 import signal
 import sys
@@ -377,6 +378,7 @@ class ResumedResults:
         self._fh = fh
         self._shown = spec_path
         self.valid_end = header_bytes
+        self.header_newline = True  # False: the header line lost its newline (cut off)
 
     def __iter__(self) -> Iterator[tuple[int, dict[str, Any]]]:
         with self._fh as fh:
@@ -451,14 +453,23 @@ def read_results(path: Path, spec: SweepSpec[Any]) -> ResumedResults:
               "its end left", file=sys.stderr)
     else:
         fh.close()
+        # Copied under a temporary name and renamed: a copy cut short (Ctrl-C, a kill)
+        # never stands as the journal, and a link at the journal's name is replaced, not
+        # written through.
+        tmp = journal.with_name(f".{journal.name}.{os.getpid()}.tmp")
         try:
-            shutil.copyfile(path, journal)
+            shutil.copyfile(path, tmp)
+            os.replace(tmp, journal)
             fh = open(journal, "rb")
             fh.readline()
         except OSError as exc:
             raise CliError(f"--resume: cannot copy {path} to {journal}: "
                            f"{exc.strerror or exc}") from None
-    return ResumedResults(journal, fh, source, len(first))
+        finally:
+            Path(tmp).unlink(missing_ok=True)
+    resumed = ResumedResults(journal, fh, source, len(first))
+    resumed.header_newline = first.endswith(b"\n")
+    return resumed
 
 
 _END = object()
@@ -512,13 +523,17 @@ def run_sweep(spec: SweepSpec[J], backend: Backend[Any, Any],
             nonlocal fh
             if fh is None and results is not None:
                 if resume is None:
-                    fh = stack.enter_context(open(results, "wb"))
+                    # A new file: a link left at the journal's name is not written through.
+                    results.unlink(missing_ok=True)
+                    fh = stack.enter_context(open(results, "xb"))
                     fh.write((json.dumps(spec.header()) + "\n").encode("utf-8"))
                     fh.flush()
                 else:  # after the resumed records (an incomplete last line cut off)
                     fh = stack.enter_context(open(results, "r+b"))
                     fh.seek(resume.valid_end)
                     fh.truncate()
+                    if not resume.header_newline:  # the file ended in the header line
+                        fh.write(b"\n")
             return fh
 
         if resume is None:

@@ -16,8 +16,8 @@ Every ``tfalda-sim`` command that writes files follows the same rules:
 4. **A journal survives a kill.** A sweep's ``--results`` file grows under a fixed name
    beside it (``Outputs.journal``: ``F.jsonl.partial``), a line per finished job, and
    becomes the file itself when the command ends; a process killed outright (SIGKILL,
-   the OOM killer, a power cut after the flush) leaves the journal, which ``--resume``
-   continues.
+   the OOM killer) leaves the journal, which ``--resume`` continues. (Lines are flushed
+   to the kernel, not synced to the disk: a power cut may lose the last ones.)
 """
 
 from __future__ import annotations

@@ -109,6 +109,9 @@ def test_attributes_methods_and_wrappers() -> None:
         assert len(frames) == 1 and frames[0].shape == (480, 752)
         venv.set_attr("probe_value", 7, indices=[1])
         assert venv.get_attr("probe_value", indices=[1]) == [7]
+        venv.set_attr("probe_pair", (10, 20))  # one value for every env, as SB3 does
+        assert venv.get_attr("probe_pair") == [(10, 20), (10, 20)]
+        assert callable(venv.get_attr("camera_frame")[0])  # SB3: attributes, never called
         assert venv.env_is_wrapped(TimeLimit) == [True, True]
         assert venv.env_is_wrapped(Monitor) == [False, False]
     finally:

@@ -177,3 +177,49 @@ def test_a_dead_worker_is_a_clear_error() -> None:
     finally:
         venv.close()
     assert all(not p.is_alive() for p in procs)
+
+
+def test_set_attr_reaches_the_env_under_the_wrappers_as_sync_vector_envs_does() -> None:
+    venv = TfaldaTrackVectorEnv(2, workers=2, track="oval")
+    sync = gym.make_vec("TfaldaTrack-v0", num_envs=2, vectorization_mode="sync",
+                        track="oval")
+    try:
+        for v in (venv, sync):
+            v.set_attr("speed_m_s", [1.0, 2.0])
+        venv.set_attr("speed_m_s", 1.25, indices=[1])
+        sync.unwrapped.envs[1].set_wrapper_attr("speed_m_s", 1.25)
+        ours = [env.speed_m_s for env in venv.get_attr_on([0, 1], "unwrapped")]
+        theirs = [env.unwrapped.speed_m_s for env in sync.unwrapped.envs]
+        assert ours == theirs == [1.0, 1.25]
+        assert venv.get_attr("speed_m_s") == (1.0, 1.25)
+        with pytest.raises(ValueError, match="indices must lie"):
+            venv.set_attr("speed_m_s", 1.0, indices=[2])
+    finally:
+        venv.close()
+        sync.close()
+
+
+def test_a_ctrl_c_in_this_processs_env_keeps_the_pipes_in_step() -> None:
+    """A KeyboardInterrupt in the env this process steps: the worker's answer is read
+    before it is raised, so the next call gets its own answers (not the step's)."""
+    venv = TfaldaTrackVectorEnv(2, workers=2, track="oval")
+    try:
+        venv.reset(seed=0)
+        env0 = venv._local[0]
+        real = env0.step
+
+        def interrupted(action: Any) -> Any:
+            env0.step = real
+            raise KeyboardInterrupt
+
+        env0.step = interrupted
+        with pytest.raises(KeyboardInterrupt):
+            venv.step(np.zeros((2, 1), np.float32))
+        obs, info = venv.reset(seed=3)
+        want, _ = gym.make_vec("TfaldaTrack-v0", num_envs=2, vectorization_mode="sync",
+                               track="oval").reset(seed=3)
+        assert np.array_equal(obs, want) and set(info) >= {"cross_track_m", "_cross_track_m"}
+        obs, *_ = venv.step(np.zeros((2, 1), np.float32))
+        assert obs.shape == (2, 42)
+    finally:
+        venv.close()

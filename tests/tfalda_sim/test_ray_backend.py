@@ -228,6 +228,27 @@ def test_resuming_reads_the_journal_and_appends_after_its_last_whole_line(
     assert "continuing from" in err and "dropped the incomplete last line 4" in err
 
 
+def test_a_journal_cut_after_its_header_resumes_on_a_new_line(tmp_path: Path) -> None:
+    head = json.dumps(_spec().header())
+    journal = tmp_path / "r.jsonl.partial"
+    journal.write_text(head)  # the kill came before the header's newline
+    resume = read_results(tmp_path / "r.jsonl", _spec())
+    run_sweep(_spec(), Backend("local", 1), lambda rec: None, results=journal,
+              resume=resume, progress=False)
+    assert journal.read_text() == head + "\n" + "".join(f'{{"x": {x}}}\n' for x in range(5))
+
+
+def test_a_link_at_the_journals_name_is_replaced_not_written_through(tmp_path: Path) -> None:
+    precious = tmp_path / "precious.txt"
+    precious.write_text("keep me")
+    journal = tmp_path / "r.jsonl.partial"
+    journal.symlink_to(precious)
+    run_sweep(_spec(), Backend("local", 1), lambda rec: None, results=journal,
+              progress=False)
+    assert precious.read_text() == "keep me" and not journal.is_symlink()
+    assert len(journal.read_text().splitlines()) == 6
+
+
 def test_resuming_a_results_file_copies_it_to_the_journal_first(tmp_path: Path) -> None:
     head = json.dumps(_spec().header())
     results = _file(tmp_path, [head, '{"x": 0}'])

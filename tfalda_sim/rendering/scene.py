@@ -312,6 +312,15 @@ class MipTiles:
         self.complete = False
         self._tiles_complete = False
 
+    def __setstate__(self, state: dict[str, object]) -> None:
+        # A copy (pickle, deepcopy) holds the painted level 0 twice, in the atlas and in
+        # the marking map's own copy of it: point the map back at the atlas, or tiles it
+        # paints later would never reach the atlas.
+        self.__dict__.update(state)
+        if self.level0_in_atlas:
+            g, (rows, cols) = ATLAS_GUARD, self.marking.shape
+            self.marking.intensity = self.atlas[g:g + rows, g:g + cols]
+
     def ensure(self, bounds: np.ndarray, affines: np.ndarray) -> None:
         """Fill what a view reads (``Scene.prepare``)."""
         rows, cols = self.marking.shape

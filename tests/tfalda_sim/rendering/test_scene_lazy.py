@@ -294,3 +294,28 @@ def test_scenes_sharing_a_marking_map_all_render_the_eager_frames(renderer: Rend
                                  strict=True):
                 np.testing.assert_array_equal(got, want)
     assert shared  # some scene did reuse an earlier scene's marking map
+
+
+@pytest.mark.parametrize("how", ["pickle", "deepcopy"])
+def test_a_copied_lazy_scene_keeps_painting_into_its_own_atlas(renderer: Renderer,
+                                                               how: str) -> None:
+    """A scene without wear paints level 0 in its atlas; a copy of it (half filled) must
+    go on doing so in the copy's atlas: new views of the copy equal the eager frames."""
+    import copy
+    import pickle
+
+    track = generated(11)
+    build_scene(load_named("oval"), Effects.off())  # the last marking map: another track's
+    lazy = build_scene(track, Effects.off())
+    eager = build_scene(track, Effects.off(), lazy=False)
+    poses = _poses(track, 6, 11)
+    for pose in poses[:2]:
+        renderer.render_windows(lazy, pose, ROIS, frame_seed=0)
+    twin = pickle.loads(pickle.dumps(lazy)) if how == "pickle" else copy.deepcopy(lazy)
+    assert twin.tiles.level0_in_atlas
+    assert np.shares_memory(twin.tiles.marking.intensity, twin.atlas)
+    for k, pose in enumerate(poses[2:]):
+        for got, want in zip(renderer.render_windows(twin, pose, ROIS, frame_seed=k),
+                             renderer.render_windows(eager, pose, ROIS, frame_seed=k),
+                             strict=True):
+            np.testing.assert_array_equal(got, want)
