@@ -287,11 +287,14 @@ def ray_stream(fn: Callable[[J], R], jobs: Iterable[J], *, workers: int | None =
         yield from _in_job_order(lambda job: task.remote(fn_ref, job), collect, jobs,
                                  workers * IN_FLIGHT_PER_WORKER, pending)
     finally:
-        for ref in pending:  # an early close: nothing more is wanted
-            with contextlib.suppress(Exception):
-                ray.cancel(ref, force=True)
         if started:
+            # Shutting down the Ray we started ends its tasks with it. (Force-cancelling
+            # them first raced the shutdown: Ray's core worker sometimes crashed, exit 1.)
             ray.shutdown()
+        else:
+            for ref in pending:  # an early close on a shared Ray: nothing more is wanted
+                with contextlib.suppress(Exception):
+                    ray.cancel(ref, force=True)
 
 
 @dataclass(frozen=True)
