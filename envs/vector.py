@@ -193,6 +193,13 @@ class TfaldaTrackVectorEnv(VectorEnv):
             raise _ERRORS[name](message)
         return answers
 
+    def _indices(self, indices: Sequence[int]) -> list[int]:
+        """``indices`` as a list of env numbers, each checked to be one of ours."""
+        chosen = [int(i) for i in indices]
+        if any(not 0 <= i < self.num_envs for i in chosen):
+            raise ValueError(f"indices must lie in [0, {self.num_envs}), got {indices!r}")
+        return chosen
+
     def _per_lane(self, values: Sequence[Any]) -> list[Sequence[Any]]:
         s = self._slices
         return [values[s[w]:s[w + 1]] for w in range(len(s) - 1)]
@@ -259,9 +266,7 @@ class TfaldaTrackVectorEnv(VectorEnv):
     def _call_on(self, indices: Sequence[int], name: str, args: tuple, kwargs: dict[str, Any],
                  *, invoke: bool) -> tuple[Any, ...]:
         self._check_open()
-        chosen = [int(i) for i in indices]
-        if any(not 0 <= i < self.num_envs for i in chosen):
-            raise ValueError(f"indices must lie in [0, {self.num_envs}), got {indices!r}")
+        chosen = self._indices(indices)
         mask = np.zeros(self.num_envs, np.bool_)
         mask[chosen] = True
         answers = self._run("call", [(name, args, kwargs, m, invoke)
@@ -278,9 +283,7 @@ class TfaldaTrackVectorEnv(VectorEnv):
         or on the envs ``indices``: one value for all of them, or a list or tuple of one
         each."""
         self._check_open()
-        chosen = list(range(self.num_envs)) if indices is None else [int(i) for i in indices]
-        if any(not 0 <= i < self.num_envs for i in chosen):
-            raise ValueError(f"indices must lie in [0, {self.num_envs}), got {indices!r}")
+        chosen = self._indices(range(self.num_envs) if indices is None else indices)
         if not isinstance(values, list | tuple):
             values = [values] * len(chosen)
         if len(values) != len(chosen):

@@ -383,20 +383,16 @@ class ResumedResults:
     def __iter__(self) -> Iterator[tuple[int, dict[str, Any]]]:
         with self._fh as fh:
             for n, raw in enumerate(fh, start=2):
+                if not raw.endswith(b"\n"):  # the last line, cut off mid-write
+                    print(f"note: --resume: dropped the incomplete last line {n} of "
+                          f"{self._shown}; its job runs again", file=sys.stderr)
+                    return
                 try:
                     rec = json.loads(raw.decode("utf-8"))
                 except (ValueError, UnicodeDecodeError):
-                    if not raw.endswith(b"\n"):  # the last line, cut off mid-write
-                        print(f"note: --resume: dropped the incomplete last line {n} of "
-                              f"{self._shown}; its job runs again", file=sys.stderr)
-                        return
                     raise CliError(f"--resume: {self._shown} line {n} is not JSON: the file "
                                    "is damaged; start afresh without --resume") from None
-                if not isinstance(rec, dict) or not raw.endswith(b"\n"):
-                    if isinstance(rec, dict):  # complete JSON, cut before its newline
-                        print(f"note: --resume: dropped the incomplete last line {n} of "
-                              f"{self._shown}; its job runs again", file=sys.stderr)
-                        return
+                if not isinstance(rec, dict):
                     raise CliError(f"--resume: {self._shown} line {n} is not a result "
                                    "record; start afresh without --resume")
                 self.valid_end += len(raw)
