@@ -504,6 +504,7 @@ class TiledMarkingMap:
         self.intensity = untouched_zeros((n_rows, n_cols)) if intensity is None else intensity
         self.labels = untouched_zeros((n_rows, n_cols)) if labels else None
         self.filled = np.zeros((-(-n_rows // tile_px), -(-n_cols // tile_px)), np.uint8)
+        self._todo = np.zeros_like(self.filled)  # the kernel's tiles to paint: all 0 between calls
         t = track.table
         gaps = track.gaps
         passes = np.array([s for x in track.intersections for s in (x.s1_m, x.s2_m)],
@@ -532,13 +533,29 @@ class TiledMarkingMap:
     def fill(self, tiles: np.ndarray) -> None:
         """Paint the tiles marked in ``tiles`` (a mask shaped like ``filled``) that are not
         painted yet."""
-        todo = (np.asarray(tiles, dtype=bool) & (self.filled == 0)).astype(np.uint8)
-        if not todo.any():
+        mask = np.asarray(tiles, dtype=bool)
+        if mask.shape != self.filled.shape:
+            raise ValueError(f"tiles must be a mask of shape {self.filled.shape}, got "
+                             f"{mask.shape}")
+        self.fill_listed(np.flatnonzero(mask))
+
+    def fill_listed(self, tiles: np.ndarray) -> None:
+        """Paint the tiles listed in ``tiles`` (int indices into ``filled``, row-major)
+        that are not painted yet: a view needs a few of ~10⁴ tiles, so nothing here scans
+        the whole grid."""
+        flat = self.filled.reshape(-1)
+        todo = tiles[flat[tiles] == 0]
+        if not len(todo):
             return
+        mask = self._todo.reshape(-1)
+        mask[todo] = 1
         labels = self.labels if self.labels is not None else _NO_LABELS
-        _raster_kernel(self.intensity, labels, *self._args, todo, self.tile_px,
-                       self.labels is not None)
-        self.filled |= todo
+        try:
+            _raster_kernel(self.intensity, labels, *self._args, self._todo, self.tile_px,
+                           self.labels is not None)
+        finally:
+            mask[todo] = 0
+        flat[todo] = 1
 
     def fill_all(self) -> MarkingMap:
         """Paint every tile; the whole map (one without labels is no ``MarkingMap``)."""

@@ -166,13 +166,15 @@ def _atlas_layout(shape0: tuple[int, int], wall_shape: tuple[int, int]
 @njit(cache=True)
 def _mark_needed(bounds: np.ndarray, affines: np.ndarray, size0_x: float, size0_y: float,
                  sizes: np.ndarray, tile_shift: np.ndarray, grids: np.ndarray,
-                 offsets: np.ndarray, filled: np.ndarray, need: np.ndarray) -> int:
+                 offsets: np.ndarray, filled: np.ndarray, need: np.ndarray,
+                 queue: np.ndarray) -> int:
     """Mark in ``need`` the unfilled tiles that bilinear taps of a view may read (see
-    ``Scene.prepare``); returns how many. Conservative: per box, the level-0 texel box of
-    its image under every pose (interval arithmetic: each term's extremes), clamped like
-    the renderer's maps, then two texels more at its level. Runs every frame of a lazy
-    scene, so it reads only scalars (no row views) and divides by shifts (tiles of
-    ``1 << tile_shift`` texels)."""
+    ``Scene.prepare``) and list them in ``queue``; returns how many (a list, not a scan
+    of ``need``: a map has ~10⁵ tiles and a step needs a few). Conservative: per box, the
+    level-0 texel box of its image under every pose (interval arithmetic: each term's
+    extremes), clamped like the renderer's maps, then two texels more at its level. Runs
+    every frame of a lazy scene, so it reads only scalars (no row views) and divides by
+    shifts (tiles of ``1 << tile_shift`` texels)."""
     count = 0
     for n in range(bounds.shape[0]):
         lv = int(bounds[n, 0])
@@ -207,68 +209,88 @@ def _mark_needed(bounds: np.ndarray, affines: np.ndarray, size0_x: float, size0_
             for tc in range(c_lo >> sh, (c_hi >> sh) + 1):
                 if not filled[row + tc] and not need[row + tc]:
                     need[row + tc] = 1
+                    queue[count] = row + tc
                     count += 1
     return count
 
 
 @njit(cache=True)
-def _propagate(need: np.ndarray, filled: np.ndarray, sizes: np.ndarray, tile: np.ndarray,
-               grids: np.ndarray, offsets: np.ndarray) -> None:
-    """A needed tile of level L needs the unfilled tiles of level L − 1 under it."""
-    for lv in range(sizes.shape[0] - 1, 0, -1):
+def _tile_level(index: int, offsets: np.ndarray) -> int:
+    """The mip level of tile ``index`` (levels' tiles are numbered one after the other)."""
+    lv = len(offsets) - 1
+    while offsets[lv] > index:
+        lv -= 1
+    return lv
+
+
+@njit(cache=True)
+def _propagate(queue: np.ndarray, n: int, need: np.ndarray, filled: np.ndarray,
+               sizes: np.ndarray, tile: np.ndarray, grids: np.ndarray, offsets: np.ndarray
+               ) -> int:
+    """A needed tile of level L needs the unfilled tiles of level L − 1 under it: add them
+    to ``need`` and to the ``n`` tiles listed in ``queue``, then sort the list (by level,
+    level 0 first, the order in which they are filled); returns its new length."""
+    i = 0
+    while i < n:
+        index = queue[i]
+        i += 1
+        lv = _tile_level(index, offsets)
+        if lv == 0:
+            continue
+        tr, tc = divmod(index - offsets[lv], grids[lv, 1])
         t = tile[lv]
         tp = tile[lv - 1]
-        for tr in range(grids[lv, 0]):
-            for tc in range(grids[lv, 1]):
-                if not need[offsets[lv] + tr * grids[lv, 1] + tc]:
-                    continue
-                r1 = min((tr + 1) * t, sizes[lv, 0])
-                c1 = min((tc + 1) * t, sizes[lv, 1])
-                for pr in range(2 * tr * t // tp, (2 * r1 - 1) // tp + 1):
-                    for pc in range(2 * tc * t // tp, (2 * c1 - 1) // tp + 1):
-                        i = offsets[lv - 1] + pr * grids[lv - 1, 1] + pc
-                        if not filled[i]:
-                            need[i] = 1
+        r1 = min((tr + 1) * t, sizes[lv, 0])
+        c1 = min((tc + 1) * t, sizes[lv, 1])
+        for pr in range(2 * tr * t // tp, (2 * r1 - 1) // tp + 1):
+            for pc in range(2 * tc * t // tp, (2 * c1 - 1) // tp + 1):
+                j = offsets[lv - 1] + pr * grids[lv - 1, 1] + pc
+                if not filled[j] and not need[j]:
+                    need[j] = 1
+                    queue[n] = j
+                    n += 1
+    queue[:n].sort()
+    return n
 
 
 @njit(cache=True)
 def _store_level0(atlas: np.ndarray, guard: int, intensity: np.ndarray, wear: np.ndarray,
-                  use_wear: bool, need0: np.ndarray, t: int) -> None:
-    """Copy the needed level-0 tiles of the marking map into the atlas, worn as
-    ``build_scene`` wears them: ``rint(paint × remaining)`` in float32."""
+                  use_wear: bool, level0: np.ndarray, grid_cols: int, t: int) -> None:
+    """Copy the level-0 tiles listed in ``level0`` (numbered row-major, ``grid_cols`` a
+    row) of the marking map into the atlas, worn as ``build_scene`` wears them:
+    ``rint(paint × remaining)`` in float32."""
     rows, cols = intensity.shape
-    for tr in range(need0.shape[0]):
-        for tc in range(need0.shape[1]):
-            if not need0[tr, tc]:
-                continue
-            for r in range(tr * t, min((tr + 1) * t, rows)):
-                for c in range(tc * t, min((tc + 1) * t, cols)):
-                    v = intensity[r, c]
-                    if use_wear:
-                        v = np.uint8(np.rint(np.float32(v) * wear[r, c]))
-                    atlas[guard + r, guard + c] = v
+    for index in level0:
+        tr, tc = divmod(index, grid_cols)
+        for r in range(tr * t, min((tr + 1) * t, rows)):
+            for c in range(tc * t, min((tc + 1) * t, cols)):
+                v = intensity[r, c]
+                if use_wear:
+                    v = np.uint8(np.rint(np.float32(v) * wear[r, c]))
+                atlas[guard + r, guard + c] = v
 
 
 @njit(cache=True)
-def _mip_tiles(atlas: np.ndarray, origins: np.ndarray, need: np.ndarray, sizes: np.ndarray,
+def _mip_tiles(atlas: np.ndarray, origins: np.ndarray, tiles: np.ndarray, sizes: np.ndarray,
                tile: np.ndarray, grids: np.ndarray, offsets: np.ndarray) -> None:
-    """The needed tiles of levels 1… as 2×2 box averages of the level below, rounded
-    like OpenCV's INTER_AREA halving: ``(a + b + c + d + 2) >> 2``."""
-    for lv in range(1, sizes.shape[0]):
+    """The listed tiles of levels 1… (``tiles``, sorted: a level after the one below) as
+    2×2 box averages of the level below, rounded like OpenCV's INTER_AREA halving:
+    ``(a + b + c + d + 2) >> 2``."""
+    for index in tiles:
+        lv = _tile_level(index, offsets)
+        if lv == 0:
+            continue
+        tr, tc = divmod(index - offsets[lv], grids[lv, 1])
         t = tile[lv]
         sx, sy = origins[lv - 1, 0], origins[lv - 1, 1]
         dx, dy = origins[lv, 0], origins[lv, 1]
-        for tr in range(grids[lv, 0]):
-            for tc in range(grids[lv, 1]):
-                if not need[offsets[lv] + tr * grids[lv, 1] + tc]:
-                    continue
-                for r in range(tr * t, min((tr + 1) * t, sizes[lv, 0])):
-                    for c in range(tc * t, min((tc + 1) * t, sizes[lv, 1])):
-                        a = (np.int32(atlas[sy + 2 * r, sx + 2 * c])
-                             + np.int32(atlas[sy + 2 * r, sx + 2 * c + 1])
-                             + np.int32(atlas[sy + 2 * r + 1, sx + 2 * c])
-                             + np.int32(atlas[sy + 2 * r + 1, sx + 2 * c + 1]))
-                        atlas[dy + r, dx + c] = np.uint8((a + 2) >> 2)
+        for r in range(tr * t, min((tr + 1) * t, sizes[lv, 0])):
+            for c in range(tc * t, min((tc + 1) * t, sizes[lv, 1])):
+                a = (np.int32(atlas[sy + 2 * r, sx + 2 * c])
+                     + np.int32(atlas[sy + 2 * r, sx + 2 * c + 1])
+                     + np.int32(atlas[sy + 2 * r + 1, sx + 2 * c])
+                     + np.int32(atlas[sy + 2 * r + 1, sx + 2 * c + 1]))
+                atlas[dy + r, dx + c] = np.uint8((a + 2) >> 2)
 
 
 class MipTiles:
@@ -309,14 +331,22 @@ class MipTiles:
         self.offsets = np.concatenate(([0], np.cumsum(counts)[:-1])).astype(np.int64)
         self.filled = np.zeros(int(counts.sum()), np.uint8)
         self.need = np.zeros_like(self.filled)
+        self.n_filled = 0
+        self._queue = np.empty(len(self.filled), np.int64)  # scratch: the tiles to fill
         self.complete = False
         self._tiles_complete = False
+
+    def __getstate__(self) -> dict[str, object]:
+        state = self.__dict__.copy()
+        del state["_queue"]  # scratch (≈ 1 MB of garbage): a copy makes its own
+        return state
 
     def __setstate__(self, state: dict[str, object]) -> None:
         # A copy (pickle, deepcopy) holds the painted level 0 twice, in the atlas and in
         # the marking map's own copy of it: point the map back at the atlas, or tiles it
         # paints later would never reach the atlas.
         self.__dict__.update(state)
+        self._queue = np.empty(len(self.filled), np.int64)
         if self.level0_in_atlas:
             g, (rows, cols) = ATLAS_GUARD, self.marking.shape
             self.marking.intensity = self.atlas[g:g + rows, g:g + cols]
@@ -324,9 +354,11 @@ class MipTiles:
     def ensure(self, bounds: np.ndarray, affines: np.ndarray) -> None:
         """Fill what a view reads (``Scene.prepare``)."""
         rows, cols = self.marking.shape
-        if _mark_needed(bounds, affines, float(cols), float(rows), self.sizes,
-                        self.tile_shift, self.grids, self.offsets, self.filled, self.need):
-            self._fill()
+        n = _mark_needed(bounds, affines, float(cols), float(rows), self.sizes,
+                         self.tile_shift, self.grids, self.offsets, self.filled, self.need,
+                         self._queue)
+        if n:
+            self._fill(n)
 
     def ensure_walls(self, lo: float, hi: float) -> None:
         """Copy in the wall texture rows that bilinear taps of rows ``lo … hi`` [texels]
@@ -346,27 +378,35 @@ class MipTiles:
         self.complete = self._tiles_complete and bool(self.wall_filled.all())
 
     def fill_all(self) -> None:
-        self.need[:] = self.filled == 0
-        self._fill()
+        todo = np.flatnonzero(self.filled == 0)
+        self.need[todo] = 1
+        self._queue[:len(todo)] = todo
+        if len(todo):
+            self._fill(len(todo))
         self.ensure_walls(0.0, float(self.wall.shape[0]))
 
-    def _fill(self) -> None:
-        _propagate(self.need, self.filled, self.sizes, self.tile, self.grids, self.offsets)
-        g0 = self.grids[0]
-        need0 = self.need[:g0[0] * g0[1]].reshape(g0[0], g0[1])
-        self.marking.fill(need0)
+    def _fill(self, n: int) -> None:
+        """Fill the ``n`` tiles listed in the queue (marked in ``need``) and those under
+        them."""
+        n = _propagate(self._queue, n, self.need, self.filled, self.sizes, self.tile,
+                       self.grids, self.offsets)
+        queue = self._queue[:n]
+        n0 = int(np.searchsorted(queue, self.offsets[1])) if len(self.offsets) > 1 else n
+        level0 = queue[:n0]  # level 0 is numbered first, as the marking map's tiles
+        self.marking.fill_listed(level0)
         if not self.level0_in_atlas:
             use_wear = self._worn is not None
             if use_wear and self._remaining is None:
                 self._remaining = _wear_remaining(self._worn, self.marking.shape)
             remaining = self._remaining if use_wear else np.ones((1, 1), np.float32)
             _store_level0(self.atlas, ATLAS_GUARD, self.marking.intensity, remaining,
-                          use_wear, need0, int(self.tile[0]))
-        _mip_tiles(self.atlas, self.origins, self.need, self.sizes, self.tile, self.grids,
+                          use_wear, level0, int(self.grids[0, 1]), int(self.tile[0]))
+        _mip_tiles(self.atlas, self.origins, queue[n0:], self.sizes, self.tile, self.grids,
                    self.offsets)
-        self.filled |= self.need
-        self.need[:] = 0
-        self._tiles_complete = bool(self.filled.all())
+        self.filled[queue] = 1
+        self.need[queue] = 0
+        self.n_filled += n
+        self._tiles_complete = self.n_filled == len(self.filled)
         self.complete = self._tiles_complete and bool(self.wall_filled.all())
 
 

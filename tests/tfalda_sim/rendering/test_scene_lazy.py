@@ -118,6 +118,20 @@ def test_lazy_scene_draws_the_same_random_numbers() -> None:
     assert c.bit_generator.state == a.bit_generator.state
 
 
+def _fill_listed(t: MipTiles, atlas: np.ndarray, filled: np.ndarray, need: np.ndarray,
+                 rng: np.random.Generator) -> None:
+    """Fill the tiles marked in ``need`` and those under them, as ``MipTiles._fill`` does."""
+    queue = np.empty(len(need), np.int64)
+    listed = np.flatnonzero(need)
+    rng.shuffle(listed)  # any order: _propagate sorts the list by level
+    queue[:len(listed)] = listed
+    n = _propagate(queue, len(listed), need, filled, t.sizes, t.tile, t.grids, t.offsets)
+    assert np.all(np.diff(queue[:n]) > 0)  # sorted, each tile once
+    assert set(queue[:n]) == set(np.flatnonzero(need))
+    _mip_tiles(atlas, t.origins, queue[:n], t.sizes, t.tile, t.grids, t.offsets)
+    filled[queue[:n]] = 1
+
+
 def test_tile_wise_mips_equal_whole_mips() -> None:
     """Level L of the atlas filled tile by tile, in any order, equals OpenCV's INTER_AREA
     halving of the whole level L − 1 (odd sizes and partial tiles included)."""
@@ -150,12 +164,8 @@ def test_tile_wise_mips_equal_whole_mips() -> None:
                 n_top = int(counts[top])
                 need[t.offsets[top]:t.offsets[top] + n_top] = rng.random(n_top) < 0.5
                 need &= filled == 0
-                _propagate(need, filled, t.sizes, t.tile, t.grids, t.offsets)
-                _mip_tiles(atlas, t.origins, need, t.sizes, t.tile, t.grids, t.offsets)
-                filled |= need
-            need = (filled == 0).astype(np.uint8)
-            _propagate(need, filled, t.sizes, t.tile, t.grids, t.offsets)
-            _mip_tiles(atlas, t.origins, need, t.sizes, t.tile, t.grids, t.offsets)
+                _fill_listed(t, atlas, filled, need, rng)
+            _fill_listed(t, atlas, filled, (filled == 0).astype(np.uint8), rng)
             wx, wy = wall_xy
             atlas[wy:wy + 20, wx:wx + 40] = wall
             atlas[wy:wy + 20, wx + 40] = wall[:, 0]
