@@ -128,19 +128,25 @@ def _paint_pixel(
     gap_line: np.ndarray,
     gap_lo: np.ndarray,
     gap_hi: np.ndarray,
+    gap_ids: np.ndarray,
+    n_gaps: int,
     passes: np.ndarray,
     start_s: float,
     start_w: float,
     stop_w: float,
+    special: bool,
     with_labels: bool,
 ) -> None:
     """Paint one pixel at road coordinates ``(s, d)`` [m] (its label too if
-    ``with_labels``; the intensity never depends on the labels)."""
+    ``with_labels``; the intensity never depends on the labels). Only the rule gaps
+    ``gap_ids[:n_gaps]`` and, with ``special``, the crossing markings (intersections,
+    start line) are looked at: the caller leaves out those that cover none of the pixel
+    (each would add exactly 0)."""
     half_road = lane_w + 0.5 * line_w
     # Intersections: no lines inside the crossing road, stop lines before it.
     cut = 0.0
     stop = 0.0
-    for sx in passes:
+    for sx in passes if special else passes[:0]:
         cut = max(cut, _cyclic_band(s, sx - half_road, sx + half_road, res, total, closed))
         stop = max(stop, _cyclic_band(s, sx - half_road - stop_w, sx - half_road, res, total,
                                       closed) * _band(d, -half_road, 0.0, res))
@@ -157,7 +163,8 @@ def _paint_pixel(
             continue
         runs = across * (1.0 - cut)
         missing = 0.0
-        for g in range(len(gap_line)):
+        for k in range(n_gaps):
+            g = gap_ids[k]
             if gap_line[g] == li:
                 missing += _cyclic_band(s, gap_lo[g], gap_hi[g], res, total, closed)
         paint = runs * max(0.0, 1.0 - missing)
@@ -170,7 +177,7 @@ def _paint_pixel(
         if runs > best_virtual:
             best_virtual = runs
             virtual_label = li + 1
-    if start_s == start_s:  # a start line exists
+    if special and start_s == start_s:  # a start line exists (near this pixel)
         paint = (_cyclic_band(s, start_s - 0.5 * start_w, start_s + 0.5 * start_w, res, total,
                               closed) * _band(d, -half_road, half_road, res))
         if paint > best_paint:
@@ -237,13 +244,17 @@ def _raster_kernel(
     n_rows, n_cols = intensity.shape
     half_road = lane_w + 0.5 * line_w
     pad = half_road + 2.0 * res
-    line_reach = 0.5 * line_w + res
+    # Beyond this distance [m] from a line's middle a pixel holds none of it: its band
+    # ends half a pixel past the paint (``_band`` is exactly 0 there, the margin covers
+    # rounding), so the spans below skip such pixels.
+    line_reach = 0.5 * line_w + 0.5 * res + ZERO_MARGIN_M
     # Arc lengths around which a crossing marking (start or stop line) may be painted.
     special = [start_s] if start_s == start_s else [0.0 for _ in range(0)]
     for sx in passes:
         special.append(sx)
     special_reach = half_road + stop_w + 0.5 * start_w + 2.0 * res
     spans = np.empty((6, 2), np.int64)  # a row's column spans [lo, hi] (empty: lo > hi)
+    gap_ids = np.empty(len(gap_line), np.int64)  # the rule gaps near a chunk
     for j in range(len(length)):
         n_chunks = max(1, int(math.ceil(length[j] / chunk_m)))
         ch = math.cos(h0[j])
@@ -267,6 +278,15 @@ def _raster_kernel(
                 for shift in (-total, 0.0, total):
                     if lo_s <= sp + shift <= hi_s:
                         has_special = True
+            n_gaps = 0
+            for g in range(len(gap_line)):  # gaps whose pixels reach the chunk
+                lo_s = s0[j] + ua - 2.0 * res
+                hi_s = s0[j] + ub + 2.0 * res
+                for shift in (-total, 0.0, total):
+                    if gap_lo[g] + shift <= hi_s and gap_hi[g] + shift >= lo_s:
+                        gap_ids[n_gaps] = g
+                        n_gaps += 1
+                        break
             xa, ya, _ = pose_at(x0[j], y0[j], h0[j], kappa[j], ua)
             xb, yb, _ = pose_at(x0[j], y0[j], h0[j], kappa[j], ub)
             xm, ym, _ = pose_at(x0[j], y0[j], h0[j], kappa[j], 0.5 * (ua + ub))
@@ -315,7 +335,7 @@ def _raster_kernel(
                             d_lo, d_hi = -pad, pad
                         else:
                             dl = (li - 1) * lane_w
-                            d_lo, d_hi = dl - line_reach - res, dl + line_reach + res
+                            d_lo, d_hi = dl - line_reach, dl + line_reach
                         q0, q1 = _linear_span(-sh, dy * ch, d_lo, d_hi, x0[j], ox, res, u_lo,
                                               u_hi)
                         spans[n_sp, 0], spans[n_sp, 1] = q0, q1
@@ -355,14 +375,19 @@ def _raster_kernel(
                             if closed and s >= total:
                                 s -= total
                             _paint_pixel(intensity, labels, r, q, s, d, res, total, closed, lane_w,
-                                         line_w, dash, period, gap_line, gap_lo, gap_hi, passes,
-                                         start_s, start_w, stop_w, with_labels)
+                                         line_w, dash, period, gap_line, gap_lo, gap_hi,
+                                         gap_ids, n_gaps, passes, start_s, start_w, stop_w,
+                                         has_special, with_labels)
 
 
 _LINE_INDEX = {"right": 0, "centre": 1, "left": 2}
 
 
-ARC_CLIP_SLACK_PX: float = 2.0
+ZERO_MARGIN_M: float = 1e-9
+"""Room [m] for rounding where a test skips pixels that hold exactly nothing (a
+pixel's coordinates are ~1e-15 m off at most)."""
+
+ARC_CLIP_SLACK_PX: float = 0.25
 """How far [px] the row spans of an arc chunk reach beyond its exact sector of the road:
 the spans only skip pixels the exact per-pixel test would reject, rounding included."""
 
