@@ -385,7 +385,8 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         self._faults = FaultInjector(faults, fault_rng)
         key = (self._faults.track(track), effects, scene_seed)
         if key != self._scene_key:
-            self._scene = self._build_scene(*key)
+            # The old scene is ours alone (a private cache): its memory goes to the new one.
+            self._scene = self._build_scene(*key, reuse=self._scene)
             self._scene_key = key
         self._detector = TfaldaDetector(self.detector_config)
 
@@ -428,8 +429,9 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             faults=(check_faults("faults", given["faults"]) if "faults" in given
                     else self.default_faults))
 
-    def _build_scene(self, track: Track, effects: Effects, scene_seed: int) -> Scene:
-        return build_scene(track, effects, np.random.default_rng(scene_seed))
+    def _build_scene(self, track: Track, effects: Effects, scene_seed: int,
+                     reuse: Scene | None = None) -> Scene:
+        return build_scene(track, effects, np.random.default_rng(scene_seed), reuse=reuse)
 
     @staticmethod
     def _check_start(track: Track, start: tuple[float, float, float]) -> None:

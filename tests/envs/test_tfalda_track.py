@@ -82,6 +82,21 @@ def test_same_seed_gives_bit_identical_1000_step_rollouts(randomize: bool) -> No
     assert not same(a, c)
 
 
+@pytest.mark.parametrize("mode", ["lanes", "image"])
+def test_an_episode_does_not_depend_on_the_episodes_before_it(mode: str) -> None:
+    """A new track per reset takes over the last scene's memory (``build_scene(reuse=…)``)
+    and may share marking maps: an env that drove other tracks (and the same track with
+    other effects) before gives, for a seed, the rollout of a fresh env."""
+    used = TfaldaTrackEnv(observation=mode, domain_randomization=True)
+    for seed in (1, 2, 3, 2):
+        rollout(used, seed=seed, steps=25)
+    for seed in (4, 3):
+        assert same(rollout(used, seed=seed, steps=40),
+                    rollout(TfaldaTrackEnv(observation=mode, domain_randomization=True),
+                            seed=seed, steps=40))
+    assert used._scene.tiles is not None and not used._scene.tiles.retired
+
+
 def test_same_seed_image_rollouts_are_identical_and_generated_tracks_follow_the_seed() -> None:
     a = rollout(TfaldaTrackEnv(observation="image"), seed=3, steps=40)
     b = rollout(TfaldaTrackEnv(observation="image"), seed=3, steps=40)

@@ -21,7 +21,7 @@ from tfalda_sim.rendering.scene import (
     _propagate,
 )
 from tfalda_sim.tracks import Track, load_named
-from tfalda_sim.tracks.raster import TiledMarkingMap, untouched_zeros
+from tfalda_sim.tracks.raster import TiledMarkingMap, memory_of, untouched_zeros
 
 ROIS = [(195, 260, 150, 75), (365, 260, 150, 75), (80, 340, 180, 85), (429, 340, 180, 85)]
 
@@ -326,6 +326,91 @@ def test_a_copied_lazy_scene_keeps_painting_into_its_own_atlas(renderer: Rendere
     assert np.shares_memory(twin.tiles.marking.intensity, twin.atlas)
     for k, pose in enumerate(poses[2:]):
         for got, want in zip(renderer.render_windows(twin, pose, ROIS, frame_seed=k),
+                             renderer.render_windows(eager, pose, ROIS, frame_seed=k),
+                             strict=True):
+            np.testing.assert_array_equal(got, want)
+
+
+def test_a_retired_scene_hands_over_all_zero_memory_and_cannot_render(
+        renderer: Renderer) -> None:
+    """``build_scene(reuse=old)`` on another track: the old scene's atlas memory, written
+    by its views (level 0, mip levels, walls), is all zeros again and taken over; the old
+    scene raises a clear error instead of rendering from memory that is not its own."""
+    old_track, new_track = generated(13), generated(3)
+    old = build_scene(old_track, Effects())
+    for k, pose in enumerate(_poses(old_track, 3, 13)):
+        renderer.render_windows(old, pose, ROIS, frame_seed=k)
+    renderer.render(old, _poses(old_track, 1, 1)[0])  # a full frame: walls too
+    assert old.tiles.wall_filled.any() and old.tiles.n_filled > 0
+    memory = memory_of(old.atlas)
+    assert memory is not None and np.frombuffer(memory, np.uint8).any()
+    new = build_scene(new_track, Effects(), reuse=old)
+    assert old.tiles.retired
+    assert not np.frombuffer(memory, np.uint8).any()  # nothing painted by the new one yet
+    if len(memory) >= new.atlas.size:
+        assert memory_of(new.atlas) is memory
+    with pytest.raises(RuntimeError, match="retired"):
+        renderer.render_windows(old, _poses(old_track, 1, 2)[0], ROIS)
+    with pytest.raises(RuntimeError, match="retired"):
+        old.fill_all()
+    eager = build_scene(new_track, Effects(), lazy=False)
+    for k, pose in enumerate(_poses(new_track, 4, 3)):
+        np.testing.assert_array_equal(renderer.render(new, pose, frame_seed=k),
+                                      renderer.render(eager, pose, frame_seed=k))
+    # The same track again: nothing to hand over (its map is shared instead).
+    again = build_scene(new_track, Effects.off(), reuse=new)
+    assert not new.tiles.retired and again.tiles.marking is new.tiles.marking
+    with pytest.raises(TypeError, match="reuse must be a Scene"):
+        build_scene(new_track, reuse="scene")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_scenes_reusing_retired_memory_all_render_the_eager_frames(renderer: Renderer,
+                                                                   seed: int) -> None:
+    """A chain of scenes, each built with ``reuse=`` an earlier one (as the env does on a
+    new track), others held that share a retired scene's marking map, with and without
+    wear: every live scene's views equal its eager scene's, whatever came before."""
+    rng = np.random.default_rng(seed)
+    tracks = [generated(3), generated(7), load_named("oval"), generated(19)]
+    held: list[tuple[Any, Any]] = []
+    retired = 0
+    for _ in range(16):
+        track = tracks[int(rng.integers(len(tracks)))]
+        fx, scene_seed = _effects(("default", "off", "randomised")[int(rng.integers(3))],
+                                  int(rng.integers(100)))
+        reuse = held[int(rng.integers(len(held)))][0] if held and rng.random() < 0.7 else None
+        lazy = build_scene(track, fx, np.random.default_rng(scene_seed), reuse=reuse)
+        eager = build_scene(track, fx, np.random.default_rng(scene_seed), lazy=False)
+        if reuse is not None and reuse.tiles.retired:
+            retired += 1
+            held = [(s, e) for s, e in held if s is not reuse]
+        held = [*held[-3:], (lazy, eager)]
+        for k in range(2):
+            got_scene, want_scene = held[int(rng.integers(len(held)))]
+            pose = _poses(got_scene.track, 1, int(rng.integers(1000)))[0]
+            for got, want in zip(renderer.render_windows(got_scene, pose, ROIS, frame_seed=k),
+                                 renderer.render_windows(want_scene, pose, ROIS, frame_seed=k),
+                                 strict=True):
+                np.testing.assert_array_equal(got, want)
+    assert retired >= 3
+
+
+def test_a_scene_sharing_a_retired_scene_s_marking_map_repaints_it(renderer: Renderer) -> None:
+    """Scene b shares the marking map that paints into scene a's atlas; a is retired: the
+    map starts again on its own memory, and b's new views still equal the eager frames."""
+    track = replace(generated(21), name="shared then retired")
+    a = build_scene(track, Effects.off())
+    poses = _poses(track, 6, 21)
+    renderer.render_windows(a, poses[0], ROIS)
+    b = build_scene(track, Effects())  # the same track: shares a's map, copies level 0
+    assert b.tiles.marking is a.tiles.marking and a.tiles.level0_in_atlas
+    renderer.render_windows(b, poses[1], ROIS)
+    build_scene(generated(3), Effects(), reuse=a)
+    assert a.tiles.retired
+    assert not np.shares_memory(b.tiles.marking.intensity, a.atlas)
+    eager = build_scene(track, Effects(), lazy=False)
+    for k, pose in enumerate(poses):
+        for got, want in zip(renderer.render_windows(b, pose, ROIS, frame_seed=k),
                              renderer.render_windows(eager, pose, ROIS, frame_seed=k),
                              strict=True):
             np.testing.assert_array_equal(got, want)
