@@ -297,6 +297,10 @@ def _raster_kernel(
             r_hi = min(n_rows - 1, int(math.ceil((oy - min(ya, yb, ym) + bow) / res)))
             if not _any_tile(todo, tile, r_lo, r_hi, c_lo, c_hi):
                 continue
+            # A plain chunk (no crossing marking, no rule gap, no labels): a pixel near
+            # the right or left line holds that line's share across the road, whatever
+            # its arc length (``_paint_pixel`` multiplies it by exactly 1.0 here).
+            plain = not has_special and n_gaps == 0 and not with_labels
             if arc:
                 # The chunk's sector of the annulus |d| <= pad, as two half-planes through
                 # the centre (when the sector is convex), loosened by ARC_CLIP_SLACK_PX.
@@ -355,12 +359,22 @@ def _raster_kernel(
                             if arc:
                                 vx = px - cx
                                 vy = py - cy
-                                d = sign * (radius - math.hypot(vx, vy))
+                                hv = math.hypot(vx, vy)
+                                d = sign * (radius - hv)
                                 if abs(d) > pad or not (has_special
                                                         or _near_line(d, lane_w, line_reach)):
                                     continue
-                                u = ((sign * (math.atan2(vy, vx) - phi0)) % (2.0 * math.pi)
-                                     ) * radius
+                                side = plain and abs(abs(d) - lane_w) <= line_reach
+                                # Well inside the chunk's sector (by far more than rounding
+                                # moves an angle), its arc length is inside [ua, ub): no
+                                # atan2 for a pixel whose value does not depend on it.
+                                if not (side and wedge
+                                        and sign * (ax_ * vy - ay_ * vx) > INSIDE_MARGIN * hv
+                                        and sign * (vx * by_ - vy * bx_) > INSIDE_MARGIN * hv):
+                                    u = ((sign * (math.atan2(vy, vx) - phi0))
+                                         % (2.0 * math.pi)) * radius
+                                    if u < ua or u > ub or (u == ub and not last):
+                                        continue
                             else:
                                 dx = px - x0[j]
                                 dy = py - y0[j]
@@ -368,8 +382,16 @@ def _raster_kernel(
                                 if abs(d) > pad or not (has_special
                                                         or _near_line(d, lane_w, line_reach)):
                                     continue
+                                side = plain and abs(abs(d) - lane_w) <= line_reach
                                 u = dx * ch + dy * sh
-                            if u < ua or u > ub or (u == ub and not last):
+                                if u < ua or u > ub or (u == ub and not last):
+                                    continue
+                            if side:  # ``_paint_pixel``'s value, its expressions as they are
+                                dl = lane_w if d > 0.0 else -lane_w
+                                across = _band(d, dl - 0.5 * line_w, dl + 0.5 * line_w, res)
+                                value = int(min(1.0, across) * 255.0 + 0.5)
+                                if value > intensity[r, q]:
+                                    intensity[r, q] = value
                                 continue
                             s = s0[j] + u
                             if closed and s >= total:
@@ -382,6 +404,10 @@ def _raster_kernel(
 
 _LINE_INDEX = {"right": 0, "centre": 1, "left": 2}
 
+
+INSIDE_MARGIN: float = 1e-9
+"""How far inside a chunk's sector [rad] a pixel must lie for its arc length to be
+known to fall inside the chunk without computing it (rounding moves it ~1e-15)."""
 
 ZERO_MARGIN_M: float = 1e-9
 """Room [m] for rounding where a test skips pixels that hold exactly nothing (a

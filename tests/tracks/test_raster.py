@@ -149,9 +149,16 @@ def test_a_map_without_labels_paints_the_same_intensity() -> None:
     from tests.conftest import generated
     from tfalda_sim.tracks.raster import TiledMarkingMap
 
+    from tfalda_sim.tracks import Arc
+
     rng = np.random.default_rng(1)
     eight = next(generated(s) for s in range(100) if generated(s).intersections)
-    for track in (generated(4), eight, load_named("thesis")):
+    gaps = next(generated(s) for s in range(100) if len(generated(s).gaps) >= 2)
+    # Without labels, pixels of the side lines in chunks without crossings or gaps take a
+    # shortcut (no arc length, no atan2): tight and wide arcs, open strips, gaps, crossings.
+    tight = Track((Arc(0.45, 2 * math.pi),), closed=True)
+    for track in (generated(4), generated(2), gaps, eight, load_named("thesis"),
+                  load_named("oval"), strip(0.37), tight):
         with_labels = TiledMarkingMap(track)
         bare = TiledMarkingMap(track, labels=False)
         assert bare.labels is None
