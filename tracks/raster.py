@@ -205,6 +205,35 @@ def _near_line(d: float, lane_w: float, reach: float) -> bool:
 
 
 @njit(cache=True)
+def _chunk_boxes(n_rows: int, n_cols: int, ox: float, oy: float, res: float, x0: np.ndarray,
+                 y0: np.ndarray, h0: np.ndarray, kappa: np.ndarray, length: np.ndarray,
+                 lane_w: float, line_w: float, chunk_m: float) -> np.ndarray:
+    """Per chunk of road (segments in order, ``chunk_m`` [m] at most each), the pixel box
+    ``(r_lo, r_hi, c_lo, c_hi)`` that can hold its paint, clipped to the map."""
+    pad = lane_w + 0.5 * line_w + 2.0 * res
+    n = 0
+    for j in range(len(length)):
+        n += max(1, int(math.ceil(length[j] / chunk_m)))
+    boxes = np.empty((n, 4), np.int64)
+    k = 0
+    for j in range(len(length)):
+        n_chunks = max(1, int(math.ceil(length[j] / chunk_m)))
+        for c in range(n_chunks):
+            ua = length[j] * c / n_chunks
+            ub = length[j] * (c + 1) / n_chunks
+            xa, ya, _ = pose_at(x0[j], y0[j], h0[j], kappa[j], ua)
+            xb, yb, _ = pose_at(x0[j], y0[j], h0[j], kappa[j], ub)
+            xm, ym, _ = pose_at(x0[j], y0[j], h0[j], kappa[j], 0.5 * (ua + ub))
+            bow = 0.125 * (ub - ua) ** 2 * abs(kappa[j]) + pad
+            boxes[k, 0] = max(0, int(math.floor((oy - max(ya, yb, ym) - bow) / res)))
+            boxes[k, 1] = min(n_rows - 1, int(math.ceil((oy - min(ya, yb, ym) + bow) / res)))
+            boxes[k, 2] = max(0, int(math.floor((min(xa, xb, xm) - bow - ox) / res)))
+            boxes[k, 3] = min(n_cols - 1, int(math.ceil((max(xa, xb, xm) + bow - ox) / res)))
+            k += 1
+    return boxes
+
+
+@njit(cache=True)
 def _raster_kernel(
     intensity: np.ndarray,
     labels: np.ndarray,
@@ -231,17 +260,19 @@ def _raster_kernel(
     start_w: float,
     stop_w: float,
     chunk_m: float,
+    boxes: np.ndarray,
     todo: np.ndarray,
     tile: int,
     with_labels: bool,
 ) -> None:
     """Paint the pixels of the tiles marked in ``todo`` (``tile`` × ``tile`` px each);
-    ``labels`` only if ``with_labels`` (else any array: it is not touched).
+    ``labels`` only if ``with_labels`` (else any array: it is not touched). ``boxes``:
+    ``_chunk_boxes`` of the same arguments (constants of the map: a view's few new tiles
+    need not pay for every chunk's box again).
 
     Chunks and pixels are visited in the same order whatever the tiles, and every pixel's
     value depends only on its own centre, so a tile painted alone equals the same tile of
     the whole map, labels included."""
-    n_rows, n_cols = intensity.shape
     half_road = lane_w + 0.5 * line_w
     pad = half_road + 2.0 * res
     # Beyond this distance [m] from a line's middle a pixel holds none of it: its band
@@ -255,6 +286,7 @@ def _raster_kernel(
     special_reach = half_road + stop_w + 0.5 * start_w + 2.0 * res
     spans = np.empty((6, 2), np.int64)  # a row's column spans [lo, hi] (empty: lo > hi)
     gap_ids = np.empty(len(gap_line), np.int64)  # the rule gaps near a chunk
+    k_chunk = 0  # the chunk's row of ``boxes``
     for j in range(len(length)):
         n_chunks = max(1, int(math.ceil(length[j] / chunk_m)))
         ch = math.cos(h0[j])
@@ -271,6 +303,10 @@ def _raster_kernel(
             ua = length[j] * c / n_chunks
             ub = length[j] * (c + 1) / n_chunks
             last = c == n_chunks - 1
+            r_lo, r_hi, c_lo, c_hi = boxes[k_chunk]
+            k_chunk += 1
+            if not _any_tile(todo, tile, r_lo, r_hi, c_lo, c_hi):
+                continue
             has_special = False
             for sp in special:
                 lo_s = s0[j] + ua - special_reach
@@ -287,16 +323,6 @@ def _raster_kernel(
                         gap_ids[n_gaps] = g
                         n_gaps += 1
                         break
-            xa, ya, _ = pose_at(x0[j], y0[j], h0[j], kappa[j], ua)
-            xb, yb, _ = pose_at(x0[j], y0[j], h0[j], kappa[j], ub)
-            xm, ym, _ = pose_at(x0[j], y0[j], h0[j], kappa[j], 0.5 * (ua + ub))
-            bow = 0.125 * (ub - ua) ** 2 * abs(kappa[j]) + pad
-            c_lo = max(0, int(math.floor((min(xa, xb, xm) - bow - ox) / res)))
-            c_hi = min(n_cols - 1, int(math.ceil((max(xa, xb, xm) + bow - ox) / res)))
-            r_lo = max(0, int(math.floor((oy - max(ya, yb, ym) - bow) / res)))
-            r_hi = min(n_rows - 1, int(math.ceil((oy - min(ya, yb, ym) + bow) / res)))
-            if not _any_tile(todo, tile, r_lo, r_hi, c_lo, c_hi):
-                continue
             # A plain chunk (no crossing marking, no rule gap, no labels): a pixel near
             # the right or left line holds that line's share across the road, whatever
             # its arc length (``_paint_pixel`` multiplies it by exactly 1.0 here).
@@ -517,8 +543,8 @@ def memory_of(array: np.ndarray) -> mmap.mmap | None:
 
 _NO_LABELS = np.zeros((1, 1), np.uint8)  # the kernel's labels argument when there are none
 
-TILE_PX: int = 32
-"""Edge of a tile of a ``TiledMarkingMap`` [px] (12.8 cm at 4 mm/px): the unit painted on
+TILE_PX: int = 64
+"""Edge of a tile of a ``TiledMarkingMap`` [px] (25.6 cm at 4 mm/px): the unit painted on
 demand."""
 
 
@@ -572,6 +598,7 @@ class TiledMarkingMap:
         self.filled = np.zeros((-(-n_rows // tile_px), -(-n_cols // tile_px)), np.uint8)
         self._todo = np.zeros_like(self.filled)  # the kernel's tiles to paint: all 0 between calls
         self._painted: list[np.ndarray] = []  # the tiles painted, call by call
+        self._boxes: np.ndarray | None = None  # ``_chunk_boxes``, on the first fill
         t = track.table
         gaps = track.gaps
         passes = np.array([s for x in track.intersections for s in (x.s1_m, x.s2_m)],
@@ -626,9 +653,14 @@ class TiledMarkingMap:
         mask = self._todo.reshape(-1)
         mask[todo] = 1
         labels = self.labels if self.labels is not None else _NO_LABELS
+        if self._boxes is None:
+            ox, oy, res, x0, y0, h0, kappa, length = self._args[:8]
+            lane_w, line_w, chunk_m = self._args[11], self._args[12], self._args[-1]
+            self._boxes = _chunk_boxes(*self.shape, ox, oy, res, x0, y0, h0, kappa, length,
+                                       lane_w, line_w, chunk_m)
         try:
-            _raster_kernel(self.intensity, labels, *self._args, self._todo, self.tile_px,
-                           self.labels is not None)
+            _raster_kernel(self.intensity, labels, *self._args, self._boxes, self._todo,
+                           self.tile_px, self.labels is not None)
         finally:
             mask[todo] = 0
         flat[todo] = 1

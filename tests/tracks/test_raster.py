@@ -147,9 +147,8 @@ def test_a_map_without_labels_paints_the_same_intensity() -> None:
     """``labels=False`` (a scene's map) writes no labels and the same intensity, tile by
     tile; it cannot become a MarkingMap."""
     from tests.conftest import generated
-    from tfalda_sim.tracks.raster import TiledMarkingMap
-
     from tfalda_sim.tracks import Arc
+    from tfalda_sim.tracks.raster import TiledMarkingMap
 
     rng = np.random.default_rng(1)
     eight = next(generated(s) for s in range(100) if generated(s).intersections)
