@@ -432,10 +432,53 @@ def _wrapped(env: gym.Env, wrapper: type[gym.Wrapper]) -> bool:
     return False
 
 
+_SCALARS = (float, int, bool)
+
+_plans: dict[tuple, tuple[tuple[str, ...], tuple[list[int], ...], list[tuple[int, int]]]] = {}
+"""``_merge_scalars``' plans by (keys, their types): the keys' columns per type and, per
+key, its type's block and row in it."""
+
+
+def _merge_scalars(infos: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """``_merge_infos`` of infos with the same keys, each a plain float, int or bool of the
+    same type in every info (every step of ours): one array per type, a row per key
+    (each row as ``np.array(values, dtype=type)`` makes it); None for any other infos."""
+    first = infos[0]
+    kinds = tuple(map(type, first.values()))
+    keys = tuple(first)
+    for info in infos[1:]:
+        if tuple(info) != keys or tuple(map(type, info.values())) != kinds:
+            return None
+    plan = _plans.get(key := (keys, kinds))
+    if plan is None:
+        if not all(k in _SCALARS for k in kinds):
+            return None
+        columns = tuple([j for j, k in enumerate(kinds) if k is kind] for kind in _SCALARS)
+        where = [(_SCALARS.index(k), columns[_SCALARS.index(k)].index(j))
+                 for j, k in enumerate(kinds)]
+        if len(_plans) > 16:
+            _plans.clear()
+        plan = _plans[key] = (tuple(f"_{k}" for k in keys), columns, where)
+    masks_of, columns, where = plan
+    rows = [list(info.values()) for info in infos]
+    n = len(rows)
+    blocks = [np.array([row[j] for j in cols for row in rows], dtype=kind).reshape(len(cols), n)
+              for kind, cols in zip(_SCALARS, columns, strict=True)]
+    masks = np.ones((len(keys), n), np.bool_)
+    merged: dict[str, Any] = {}
+    for j, (name, mask) in enumerate(zip(keys, masks_of, strict=True)):
+        b, i = where[j]
+        merged[name] = blocks[b][i]
+        merged[mask] = masks[j]
+    return merged
+
+
 def _merge_infos(infos: list[dict[str, Any]]) -> dict[str, Any]:
     """``SyncVectorEnv``'s info layout (``key``: an array over envs, ``_key``: which envs
     have it), built column by column: every env of ours reports the same keys."""
     n = len(infos)
+    if n and (fast := _merge_scalars(infos)) is not None:
+        return fast
     merged: dict[str, Any] = {}
     keys = list(infos[0]) if infos else []
     if any(list(info) != keys for info in infos[1:]):  # not ours (a wrapper's?): general path

@@ -154,14 +154,27 @@ def test_call_and_close() -> None:
 def test_merged_infos_match_gymnasiums_layout_also_nested_and_missing_keys() -> None:
     from tfalda_sim.envs.vector import _merge_infos
 
-    infos = [{"a": 1.0, "b": {"c": 2, "d": "x"}, "e": np.zeros(3, np.float32)},
-             {"a": 3.0, "b": {"c": 4}}]
-    sync = gym.vector.SyncVectorEnv([lambda: gym.make("CartPole-v1")] * 2)
-    want: dict[str, Any] = {}
-    for i, info in enumerate(infos):
-        want = sync._add_info(want, info, i)
-    sync.close()
-    assert_same(_merge_infos(infos), want)
+    cases = [
+        [{"a": 1.0, "b": {"c": 2, "d": "x"}, "e": np.zeros(3, np.float32)},
+         {"a": 3.0, "b": {"c": 4}}],
+        # plain scalars of one type per key (an env step's info): the fast path
+        [{"x": 0.5, "n": 2, "ok": True, "y": -1.5}, {"x": 1.5, "n": -3, "ok": False, "y": 2.0},
+         {"x": 2.5, "n": 7, "ok": True, "y": 0.0}],
+        [{"x": 0.5, "n": 2}, {"x": 1, "n": 3}],  # a key's type differs between envs
+        [{"x": 0.5, "n": 2}, {"n": 3, "x": 1.5}],  # the keys in another order
+    ]
+    for infos in cases:
+        sync = gym.vector.SyncVectorEnv([lambda: gym.make("CartPole-v1")] * len(infos))
+        want: dict[str, Any] = {}
+        for i, info in enumerate(infos):
+            want = sync._add_info(want, info, i)
+        sync.close()
+        got = _merge_infos(infos)
+        assert list(got) == list(want)
+        assert_same(got, want)
+    got = _merge_infos(cases[1])
+    got["x"][0] = 9.0  # each key's array is its own
+    assert got["y"][0] == -1.5 and got["n"].dtype == np.int64 and got["ok"].dtype == np.bool_
 
 
 def test_a_dead_worker_is_a_clear_error() -> None:
