@@ -34,7 +34,9 @@ track (the spatial index) helps it."""
 class _EagerEnv(TfaldaTrackEnv):
     """The env with the eager scene: the whole map rasterised and mipmapped at reset."""
 
-    def _build_scene(self, track: Track, effects: Effects, scene_seed: int) -> Scene:
+    def _build_scene(self, track: Track, effects: Effects, scene_seed: int,
+                     reuse: Scene | None = None) -> Scene:
+        # An eager scene takes no memory over (``reuse`` is for lazy ones).
         return build_scene(track, effects, np.random.default_rng(scene_seed), lazy=False)
 
 

@@ -37,3 +37,12 @@ def test_bench_candidates_finds_the_kernels_identical() -> None:
     assert result["identical_results"] is True
     assert result["rois"] == 24
     assert result["executed_additions_per_roi"] >= result["useful_additions_per_roi"] > 0
+
+
+def test_bench_reset_times_lazy_eager_and_fixed_track_resets() -> None:
+    result = run_json("bench_reset.py", "--resets", "3")
+    assert set(result["reset"]) == {"fixed track (seed 7)", "new track, lazy scene",
+                                    "new track, eager scene", "new track, lazy, image mode"}
+    for name, r in result["reset"].items():
+        assert r["resets"] == 3 and 0 < r["median_ms"] <= r["max_ms"], name
+    assert result["eager_over_lazy"] > 0
