@@ -88,6 +88,9 @@ class LaneInferenceSystem:
         self.widths = np.zeros((rows, 2))  # y_{n−1}: last filtered widths [px]
         # the thesis camera's tolerances are the thesis' pixels: no per-frame interpolation
         self._unit_scale = all(s == 1.0 for s in config.tolerance_scale)
+        # Looked up here once: hashing the (frozen, uncached) config for the cache four
+        # times a frame cost more than the interpolation.
+        self._limits = _limit_table(config)
         self.fault_count = 0
 
     def start(self, rows: Rows) -> None:
@@ -117,10 +120,13 @@ class LaneInferenceSystem:
                          alpha * measured[1] + (1.0 - alpha) * last[1]) if cfg.lowpass
                         else measured)
             ok = True
-            if cfg.min_max:
-                for k, y in enumerate((left.y_top, left.y_bottom)):
-                    lo, hi = width_limits(cfg, y)
-                    ok = ok and lo <= measured[k] <= hi
+            if cfg.min_max:  # ``width_limits`` at both edges: np.interp, elementwise
+                ys = (left.y_top, left.y_bottom)
+                table_rows, table_lo, table_hi = self._limits
+                los = np.interp(ys, table_rows, table_lo)
+                his = np.interp(ys, table_rows, table_hi)
+                ok = (float(los[0]) <= measured[0] <= float(his[0])
+                      and float(los[1]) <= measured[1] <= float(his[1]))
             if ok and cfg.width_change:
                 seen = filtered if cfg.width_check is WidthCheck.FILTERED else measured
                 tol = cfg.width_tolerance_px
