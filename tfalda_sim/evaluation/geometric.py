@@ -19,6 +19,7 @@ from numba import njit
 
 from tfalda_sim.tracks import Track
 from tfalda_sim.tracks.dimensions import LINE_WIDTH_M
+from tfalda_sim.tracks.index import locate_points
 
 from ..rendering import PixelGeometry
 from .metrics import EPSILON_PX
@@ -60,6 +61,34 @@ def _ground_points(lanes: np.ndarray, gx: np.ndarray, gy: np.ndarray, rho: np.nd
     return pts, ok, footprint
 
 
+@njit(cache=True)
+def _hit_rates(lanes: np.ndarray, gx: np.ndarray, gy: np.ndarray, rho: np.ndarray,
+               bonnet: np.ndarray, log2_fp: np.ndarray, x: float, y: float, yaw: float,
+               samples: int, x0: np.ndarray, y0: np.ndarray, h0: np.ndarray,
+               kappa: np.ndarray, length: np.ndarray, s0: np.ndarray, total: float,
+               closed: bool, half_road: float, grid_x0: float, grid_y0: float, cell_m: float,
+               nx: int, ny: int, cell_start: np.ndarray, items: np.ndarray, lane_w: float,
+               half_line: float, epsilon_px: float) -> np.ndarray:
+    """``geometric_hit_rates`` in one call (every env step reports it): the lanes' sample
+    points on the ground, located on the track (``Track.locate_many``'s kernel), and per
+    lane the share within ``half_line`` + ε·footprint [m] of a line."""
+    pts, ok, footprint = _ground_points(lanes, gx, gy, rho, bonnet, log2_fp, x, y, yaw,
+                                        samples)
+    lateral = locate_points(pts, x0, y0, h0, kappa, length, s0, total, closed, half_road,
+                            grid_x0, grid_y0, cell_m, nx, ny, cell_start, items)[1]
+    rates = np.zeros(lanes.shape[0])
+    for k in range(lanes.shape[0]):
+        count = 0
+        for i in range(samples):
+            j = k * samples + i
+            # Distance to the nearest of the three lines (right side, centre, left side).
+            off_line = min(abs(lateral[j]), abs(abs(lateral[j]) - lane_w))
+            if ok[j] and off_line <= half_line + epsilon_px * footprint[j]:
+                count += 1
+        rates[k] = count / samples  # a mean of 0/1 values, as numpy's: the sum / n
+    return rates
+
+
 def geometric_hit_rates(lanes: np.ndarray, geometry: PixelGeometry, track: Track,
                         pose: tuple[float, float, float], epsilon_px: float = EPSILON_PX
                         ) -> np.ndarray:
@@ -70,12 +99,10 @@ def geometric_hit_rates(lanes: np.ndarray, geometry: PixelGeometry, track: Track
     n = len(lanes)
     if n == 0:
         return np.zeros(0)
-    g = geometry
-    pts, ok, footprint = _ground_points(lanes, g.gx, g.gy, g.rho, g.bonnet, g.log2_fp,
-                                        float(pose[0]), float(pose[1]), float(pose[2]),
-                                        HIT_SAMPLES)
-    _, lateral, _ = track.locate_many(pts)
-    # Distance to the nearest of the three lines (right side, centre, left side).
-    off_line = np.minimum(np.abs(lateral), np.abs(np.abs(lateral) - track.lane_width_m))
-    hit = ok & (off_line <= 0.5 * LINE_WIDTH_M + epsilon_px * footprint)
-    return hit.reshape(n, HIT_SAMPLES).mean(axis=1)
+    g, t, index = geometry, track.table, track.index
+    return _hit_rates(lanes, g.gx, g.gy, g.rho, g.bonnet, g.log2_fp, float(pose[0]),
+                      float(pose[1]), float(pose[2]), HIT_SAMPLES, t.x0, t.y0, t.h0, t.kappa,
+                      t.length, t.s0, track.length_m, track.closed, track.half_road_m,
+                      index.x0, index.y0, index.cell_m, index.nx, index.ny, index.cell_start,
+                      index.items, track.lane_width_m, 0.5 * LINE_WIDTH_M,
+                      float(epsilon_px))
