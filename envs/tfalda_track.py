@@ -614,7 +614,8 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             "lis_fault_count": lanes.fault_count,
             "roi_reset": bool(lanes.roi_reset) and self._step_count > 0,
             "roi_resets": self._roi_resets,
-            "detector_hit_rate": float(hits.mean()),
+            # np.mean's own sum and division, without its ~10 µs of checks on 8 values
+            "detector_hit_rate": float(hits.sum()) / len(hits) if len(hits) else math.nan,
             "track": self._track_label,
         }
 
