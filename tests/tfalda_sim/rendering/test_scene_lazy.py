@@ -278,6 +278,24 @@ def test_a_scene_without_wear_paints_level_0_in_its_atlas() -> None:
     assert not np.shares_memory(worn.tiles.marking.intensity, worn.atlas)
 
 
+def _random_effects(rng: np.random.Generator) -> tuple[Effects, int]:
+    return _effects(("default", "off", "randomised")[int(rng.integers(3))],
+                    int(rng.integers(100)))
+
+
+def _random_views_equal(renderer: Renderer, held: list[tuple[Any, Any]],
+                        rng: np.random.Generator) -> None:
+    """Two views of held (lazy, eager) pairs, drawn at random: the lazy frames equal the
+    eager ones."""
+    for k in range(2):
+        got_scene, want_scene = held[int(rng.integers(len(held)))]
+        pose = _poses(got_scene.track, 1, int(rng.integers(1000)))[0]
+        for got, want in zip(renderer.render_windows(got_scene, pose, ROIS, frame_seed=k),
+                             renderer.render_windows(want_scene, pose, ROIS, frame_seed=k),
+                             strict=True):
+            np.testing.assert_array_equal(got, want)
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_scenes_sharing_a_marking_map_all_render_the_eager_frames(renderer: Renderer,
                                                                    seed: int) -> None:
@@ -290,19 +308,12 @@ def test_scenes_sharing_a_marking_map_all_render_the_eager_frames(renderer: Rend
     shared = 0
     for _ in range(14):
         track = tracks[int(rng.integers(len(tracks)))]
-        fx, scene_seed = _effects(("default", "off", "randomised")[int(rng.integers(3))],
-                                  int(rng.integers(100)))
+        fx, scene_seed = _random_effects(rng)
         lazy = build_scene(track, fx, np.random.default_rng(scene_seed))
         eager = build_scene(track, fx, np.random.default_rng(scene_seed), lazy=False)
         shared += any(lazy.tiles.marking is old.tiles.marking for old, _ in held)
         held = [*held[-3:], (lazy, eager)]
-        for k in range(2):
-            got_scene, want_scene = held[int(rng.integers(len(held)))]
-            pose = _poses(got_scene.track, 1, int(rng.integers(1000)))[0]
-            for got, want in zip(renderer.render_windows(got_scene, pose, ROIS, frame_seed=k),
-                                 renderer.render_windows(want_scene, pose, ROIS, frame_seed=k),
-                                 strict=True):
-                np.testing.assert_array_equal(got, want)
+        _random_views_equal(renderer, held, rng)
     assert shared  # some scene did reuse an earlier scene's marking map
 
 
@@ -376,8 +387,7 @@ def test_scenes_reusing_retired_memory_all_render_the_eager_frames(renderer: Ren
     retired = 0
     for _ in range(16):
         track = tracks[int(rng.integers(len(tracks)))]
-        fx, scene_seed = _effects(("default", "off", "randomised")[int(rng.integers(3))],
-                                  int(rng.integers(100)))
+        fx, scene_seed = _random_effects(rng)
         reuse = held[int(rng.integers(len(held)))][0] if held and rng.random() < 0.7 else None
         lazy = build_scene(track, fx, np.random.default_rng(scene_seed), reuse=reuse)
         eager = build_scene(track, fx, np.random.default_rng(scene_seed), lazy=False)
@@ -385,13 +395,7 @@ def test_scenes_reusing_retired_memory_all_render_the_eager_frames(renderer: Ren
             retired += 1
             held = [(s, e) for s, e in held if s is not reuse]
         held = [*held[-3:], (lazy, eager)]
-        for k in range(2):
-            got_scene, want_scene = held[int(rng.integers(len(held)))]
-            pose = _poses(got_scene.track, 1, int(rng.integers(1000)))[0]
-            for got, want in zip(renderer.render_windows(got_scene, pose, ROIS, frame_seed=k),
-                                 renderer.render_windows(want_scene, pose, ROIS, frame_seed=k),
-                                 strict=True):
-                np.testing.assert_array_equal(got, want)
+        _random_views_equal(renderer, held, rng)
     assert retired >= 3
 
 
