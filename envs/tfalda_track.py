@@ -386,6 +386,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         key = (self._faults.track(track), effects, scene_seed)
         if key != self._scene_key:
             # The old scene is ours alone (a private cache): its memory goes to the new one.
+            self._scene_key = None  # a build that fails must not leave the old scene current
             self._scene = self._build_scene(*key, reuse=self._scene)
             self._scene_key = key
         self._detector = TfaldaDetector(self.detector_config)

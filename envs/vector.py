@@ -434,15 +434,16 @@ def _wrapped(env: gym.Env, wrapper: type[gym.Wrapper]) -> bool:
 
 _SCALARS = (float, int, bool)
 
-_plans: dict[tuple, tuple[tuple[str, ...], tuple[list[int], ...], list[tuple[int, int]]]] = {}
-"""``_merge_scalars``' plans by (keys, their types): the keys' columns per type and, per
-key, its type's block and row in it."""
+_plans: dict[tuple, Any] = {}
+"""``_merge_scalars``' plans by (keys, their types): per key its type's block and row in
+it (−1: a string), the numeric types' columns; False where the fast path does not apply."""
 
 
 def _merge_scalars(infos: list[dict[str, Any]]) -> dict[str, Any] | None:
-    """``_merge_infos`` of infos with the same keys, each a plain float, int or bool of the
-    same type in every info (every step of ours): one array per type, a row per key
-    (each row as ``np.array(values, dtype=type)`` makes it); None for any other infos."""
+    """``_merge_infos`` of infos with the same keys, each a plain float, int, bool or str
+    of the same type in every info (every step of ours): one array per numeric type, a
+    row per key (each row as ``np.array(values, dtype=type)`` makes it; the rows are views
+    of that array), an object array per string key; None for any other infos."""
     first = infos[0]
     kinds = tuple(map(type, first.values()))
     keys = tuple(first)
@@ -451,14 +452,17 @@ def _merge_scalars(infos: list[dict[str, Any]]) -> dict[str, Any] | None:
             return None
     plan = _plans.get(key := (keys, kinds))
     if plan is None:
-        if not all(k in _SCALARS for k in kinds):
-            return None
-        columns = tuple([j for j, k in enumerate(kinds) if k is kind] for kind in _SCALARS)
-        where = [(_SCALARS.index(k), columns[_SCALARS.index(k)].index(j))
-                 for j, k in enumerate(kinds)]
+        plan = False
+        if all(k in _SCALARS or k is str for k in kinds):
+            columns = tuple([j for j, k in enumerate(kinds) if k is kind] for kind in _SCALARS)
+            where = [(_SCALARS.index(k), columns[_SCALARS.index(k)].index(j))
+                     if k is not str else (-1, j) for j, k in enumerate(kinds)]
+            plan = (tuple(f"_{k}" for k in keys), columns, where)
         if len(_plans) > 16:
             _plans.clear()
-        plan = _plans[key] = (tuple(f"_{k}" for k in keys), columns, where)
+        _plans[key] = plan
+    if plan is False:
+        return None
     masks_of, columns, where = plan
     rows = [list(info.values()) for info in infos]
     n = len(rows)
@@ -468,7 +472,12 @@ def _merge_scalars(infos: list[dict[str, Any]]) -> dict[str, Any] | None:
     merged: dict[str, Any] = {}
     for j, (name, mask) in enumerate(zip(keys, masks_of, strict=True)):
         b, i = where[j]
-        merged[name] = blocks[b][i]
+        if b < 0:  # as the general path: an object column
+            column = np.full(n, fill_value=None, dtype=object)
+            column[:] = [row[i] for row in rows]
+            merged[name] = column
+        else:
+            merged[name] = blocks[b][i]
         merged[mask] = masks[j]
     return merged
 

@@ -279,6 +279,9 @@ def _raster_kernel(
     # ends half a pixel past the paint (``_band`` is exactly 0 there, the margin covers
     # rounding), so the spans below skip such pixels.
     line_reach = 0.5 * line_w + 0.5 * res + ZERO_MARGIN_M
+    # The side-line shortcut below needs a side line's pixels to hold none of the centre
+    # line: lanes wider than a line and a pixel (any real track; a toy may be narrower).
+    lines_apart = lane_w - line_reach > line_reach
     # Arc lengths around which a crossing marking (start or stop line) may be painted.
     special = [start_s] if start_s == start_s else [0.0 for _ in range(0)]
     for sx in passes:
@@ -326,7 +329,7 @@ def _raster_kernel(
             # A plain chunk (no crossing marking, no rule gap, no labels): a pixel near
             # the right or left line holds that line's share across the road, whatever
             # its arc length (``_paint_pixel`` multiplies it by exactly 1.0 here).
-            plain = not has_special and n_gaps == 0 and not with_labels
+            plain = not has_special and n_gaps == 0 and not with_labels and lines_apart
             if arc:
                 # The chunk's sector of the annulus |d| <= pad, as two half-planes through
                 # the centre (when the sector is convex), loosened by ARC_CLIP_SLACK_PX.

@@ -311,3 +311,15 @@ def test_record_video_wrapper_writes_an_mp4(tmp_path) -> None:
     env.close()
     videos = list((tmp_path / "videos").glob("*.mp4"))
     assert len(videos) == 1 and videos[0].stat().st_size > 1000
+
+
+def test_a_reset_refused_for_its_track_leaves_the_env_as_it_was() -> None:
+    """A track the renderer refuses (too large) fails the reset before the last scene
+    hands its memory over: the next reset and its rollout are a fresh env's."""
+    from tfalda_sim.tracks import Straight, Track
+
+    env = TfaldaTrackEnv()
+    rollout(env, seed=0, steps=5)
+    with pytest.raises(ValueError, match="too large"):
+        env.reset(options={"track": Track((Straight(100.0),), closed=False)})
+    assert same(rollout(env, seed=0, steps=20), rollout(TfaldaTrackEnv(), seed=0, steps=20))

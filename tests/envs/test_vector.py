@@ -160,6 +160,7 @@ def test_merged_infos_match_gymnasiums_layout_also_nested_and_missing_keys() -> 
         # plain scalars of one type per key (an env step's info): the fast path
         [{"x": 0.5, "n": 2, "ok": True, "y": -1.5}, {"x": 1.5, "n": -3, "ok": False, "y": 2.0},
          {"x": 2.5, "n": 7, "ok": True, "y": 0.0}],
+        [{"x": 0.5, "track": "oval"}, {"x": 1.5, "track": "thesis"}],  # a named track
         [{"x": 0.5, "n": 2}, {"x": 1, "n": 3}],  # a key's type differs between envs
         [{"x": 0.5, "n": 2}, {"n": 3, "x": 1.5}],  # the keys in another order
     ]

@@ -156,8 +156,11 @@ def test_a_map_without_labels_paints_the_same_intensity() -> None:
     # Without labels, pixels of the side lines in chunks without crossings or gaps take a
     # shortcut (no arc length, no atan2): tight and wide arcs, open strips, gaps, crossings.
     tight = Track((Arc(0.45, 2 * math.pi),), closed=True)
+    # Lanes narrower than a line and a pixel: a side line's pixels hold the centre line too.
+    narrow = [strip(0.37, lane_width_m=w) for w in (0.015, 0.02, 0.0239)] + [
+        Track((Arc(1.0, math.pi), Straight(0.5)), closed=False, lane_width_m=0.02)]
     for track in (generated(4), generated(2), gaps, eight, load_named("thesis"),
-                  load_named("oval"), strip(0.37), tight):
+                  load_named("oval"), strip(0.37), tight, *narrow):
         with_labels = TiledMarkingMap(track)
         bare = TiledMarkingMap(track, labels=False)
         assert bare.labels is None

@@ -93,6 +93,15 @@ class LaneInferenceSystem:
         self._limits = _limit_table(config)
         self.fault_count = 0
 
+    def __getstate__(self) -> dict[str, object]:
+        state = self.__dict__.copy()
+        del state["_limits"]  # derived from the config: pickles stay as they were
+        return state
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        self._limits = _limit_table(self.config)
+
     def start(self, rows: Rows) -> None:
         """Initialise the filter with a first frame's widths (listing A.4 ``init``)."""
         self.widths = np.array([measured_widths(left, right) for left, right in rows],

@@ -352,7 +352,7 @@ class MipTiles:
         self.need = np.zeros_like(self.filled)
         self.n_filled = 0
         self._queue = np.empty(len(self.filled), np.int64)  # scratch: the tiles to fill
-        self._filled_runs: list[np.ndarray] = []  # the tiles filled, fill by fill (sorted)
+        self._written_runs: list[np.ndarray] = []  # tiles (maybe) written, fill by fill
         self.complete = False
         self._tiles_complete = False
         self.retired = False
@@ -368,6 +368,10 @@ class MipTiles:
         # paints later would never reach the atlas.
         self.__dict__.update(state)
         self._queue = np.empty(len(self.filled), np.int64)
+        if "n_filled" not in state:  # pickled before the fill lists
+            self.n_filled = int(np.count_nonzero(self.filled))
+            self._written_runs = [np.flatnonzero(self.filled)]
+            self.retired = False
         if self.level0_in_atlas:
             g, (rows, cols) = ATLAS_GUARD, self.marking.shape
             self.marking.intensity = self.atlas[g:g + rows, g:g + cols]
@@ -387,7 +391,7 @@ class MipTiles:
             return None
         args = (self.sizes, self.tile, self.grids, self.offsets)
         # Lists, not scans of ``filled`` (~10⁵ tiles): each fill's tiles, level 0 first.
-        for run in self._filled_runs:
+        for run in self._written_runs:
             _zero_tiles(self.atlas, self.origins, run, *args)
         if self.level0_in_atlas:  # level 0 also holds what the map painted for other scenes
             _zero_tiles(self.atlas, self.origins, self.marking.painted_tiles(), *args)
@@ -446,6 +450,21 @@ class MipTiles:
         n = _propagate(self._queue, n, self.need, self.filled, self.sizes, self.tile,
                        self.grids, self.offsets)
         queue = self._queue[:n]
+        self._written_runs.append(queue.copy())  # for ``retire``, even if this fails
+        try:
+            self._fill_queued(queue)
+        except BaseException:
+            self.need[queue] = 0  # not filled: the next view that reads them lists them again
+            raise
+        self.filled[queue] = 1
+        self.need[queue] = 0
+        self.n_filled += n
+        self._tiles_complete = self.n_filled == len(self.filled)
+        self.complete = self._tiles_complete and bool(self.wall_filled.all())
+
+    def _fill_queued(self, queue: np.ndarray) -> None:
+        """Paint and filter the listed tiles (sorted: level 0 first)."""
+        n = len(queue)
         n0 = int(np.searchsorted(queue, self.offsets[1])) if len(self.offsets) > 1 else n
         level0 = queue[:n0]  # level 0 is numbered first, as the marking map's tiles
         self.marking.fill_listed(level0)
@@ -458,12 +477,6 @@ class MipTiles:
                           use_wear, level0, int(self.grids[0, 1]), int(self.tile[0]))
         _mip_tiles(self.atlas, self.origins, queue[n0:], self.sizes, self.tile, self.grids,
                    self.offsets)
-        self.filled[queue] = 1
-        self.need[queue] = 0
-        self.n_filled += n
-        self._filled_runs.append(queue.copy())
-        self._tiles_complete = self.n_filled == len(self.filled)
-        self.complete = self._tiles_complete and bool(self.wall_filled.all())
 
 
 def _blobs(rng: np.random.Generator, shape: tuple[int, int], count: int,
@@ -587,10 +600,6 @@ def build_scene(track: Track, effects: Effects | None = None,
     hall = hall or Hall()
     tiles = None
     if lazy and marking_map is None:
-        memory = None
-        if (reuse is not None and reuse.tiles is not None
-                and not (reuse.track is track or reuse.track == track)):
-            memory = reuse.tiles.retire()
         marking = _marking_for(track)
         if marking is None:
             origin_m, shape = map_geometry(track)
@@ -600,6 +609,10 @@ def build_scene(track: Track, effects: Effects | None = None,
         worn = _wear_noise(rng, shape, fx.wear) if fx.wear > 0 else None
         wall = _cached_wall_texture(rng, hall)
         (height, width), sizes, level_xy, wall_origin = _atlas_layout(shape, wall.shape)
+        memory = None  # retired only now: every check that can refuse the track is done
+        if (reuse is not None and reuse.tiles is not None
+                and not (reuse.track is track or reuse.track == track)):
+            memory = reuse.tiles.retire()
         # Unfilled tiles and walls cost nothing; retired memory is all zeros again.
         atlas = untouched_zeros((height, width), memory)
         origins = np.array(level_xy, np.float32)

@@ -179,3 +179,25 @@ def test_config_rejects_inconsistent_stages() -> None:
 def test_gap_hold_ratio_is_checked() -> None:
     with pytest.raises(ValueError, match="gap_hold_ratio"):
         LisConfig(gap_hold_ratio=1.5)
+
+
+def test_a_pickled_lis_keeps_its_state_and_checks_the_same() -> None:
+    import pickle
+
+    import numpy as np
+
+    lis = LaneInferenceSystem(LisConfig(), 2)
+
+    def row(x_left: float, x_right: float, y_top: float, y_bottom: float
+            ) -> tuple[LaneSegment, LaneSegment]:
+        return (LaneSegment(x_left, 0.0, 1.0, y_top, y_bottom),
+                LaneSegment(x_right, 0.0, 1.0, y_top, y_bottom))
+
+    rows = [row(300.0, 450.0, 260.0, 334.0), row(250.0, 500.0, 340.0, 424.0)]
+    lis.start(rows)
+    twin = pickle.loads(pickle.dumps(lis))
+    assert "_limits" not in lis.__getstate__()
+    wide = [row(100.0, 600.0, 260.0, 334.0), rows[1]]
+    a, b = lis.infer(wide, rows), twin.infer(wide, rows)
+    assert a.replaced == b.replaced and a.replaced[0]  # 500 px at row 260: over the limit
+    np.testing.assert_array_equal(a.widths, b.widths)

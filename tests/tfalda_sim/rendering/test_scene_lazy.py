@@ -418,3 +418,31 @@ def test_a_scene_sharing_a_retired_scene_s_marking_map_repaints_it(renderer: Ren
                              renderer.render_windows(eager, pose, ROIS, frame_seed=k),
                              strict=True):
             np.testing.assert_array_equal(got, want)
+
+
+def test_a_fill_that_fails_is_filled_by_the_next_view(renderer: Renderer, monkeypatch) -> None:
+    """An error inside a fill (here the worn paint's first use) leaves its tiles unfilled
+    and not marked needed: the next view fills them, and equals the eager frame."""
+    import tfalda_sim.rendering.scene as scene_module
+
+    track = replace(generated(6), name="failing fill")
+    fx = replace(Effects(), wear=0.4)
+    lazy = build_scene(track, fx, np.random.default_rng(2))
+    eager = build_scene(track, fx, np.random.default_rng(2), lazy=False)
+    real = scene_module._wear_remaining
+    calls = []
+
+    def fail_once(*args: Any) -> np.ndarray:
+        calls.append(1)
+        if len(calls) == 1:
+            raise MemoryError("simulated")
+        return real(*args)
+
+    monkeypatch.setattr(scene_module, "_wear_remaining", fail_once)
+    pose = _poses(track, 1, 6)[0]
+    with pytest.raises(MemoryError):
+        renderer.render_windows(lazy, pose, ROIS)
+    assert not lazy.tiles.need.any() and lazy.tiles.n_filled == 0
+    for got, want in zip(renderer.render_windows(lazy, pose, ROIS, frame_seed=1),
+                         renderer.render_windows(eager, pose, ROIS, frame_seed=1), strict=True):
+        np.testing.assert_array_equal(got, want)
