@@ -4,9 +4,12 @@ speed is measured by the scripts, never by tests)."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
@@ -46,3 +49,27 @@ def test_bench_reset_times_lazy_eager_and_fixed_track_resets() -> None:
     for name, r in result["reset"].items():
         assert r["resets"] == 3 and 0 < r["median_ms"] <= r["max_ms"], name
     assert result["eager_over_lazy"] > 0
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="bench_ab needs two cores")
+def test_bench_ab_runs_two_checkouts_side_by_side() -> None:
+    """This checkout against itself (the other checkout's Python is any interpreter with
+    tfalda-sim installed): both sides report every figure and their ratio."""
+    result = run_json("bench_ab.py", "--other", sys.executable, "--steps", "30",
+                      "--resets", "2", "--pairs", "2")
+    assert [row["pair"] for row in result["pairs"]] == [1, 2]
+    first, second = result["pairs"]
+    assert (first["this_core"], first["other_core"]) == (second["other_core"],
+                                                         second["this_core"])
+    for row in result["pairs"]:
+        assert set(row["this"]) == set(row["other"]) == set(row["ratio"]) == {
+            "fixed_steps_per_s", "generated_steps_per_s", "reset_median_ms"}
+        assert all(v > 0 for v in row["ratio"].values())
+
+
+def test_bench_ab_refuses_a_missing_interpreter() -> None:
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_ab.py"), "--other",
+                           "/nonexistent/python"], capture_output=True, text=True,
+                          timeout=60, check=False)
+    assert done.returncode == 2 and "not an executable file" in done.stderr
+    assert "Traceback" not in done.stderr
