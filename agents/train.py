@@ -149,6 +149,10 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
     # One torch thread (restored at the end): during rollouts the env workers hold the
     # cores, and a 64-64 MLP's minibatch updates gain nothing from a second one.
     threads, cv2_threads = torch.get_num_threads(), cv2.getNumThreads()
+    # Gradients on, whatever the caller's mode (restored at the end): a Ctrl-C landing
+    # inside torch's no_grad exit in an earlier run in this process can leave them off.
+    grad = torch.is_grad_enabled()
+    torch.set_grad_enabled(True)
     torch.set_num_threads(1)
     cv2.setNumThreads(1)  # this process steps envs too (the vector env's first slice)
     # Staged in the nearest existing folder (same file system, so the final moves are
@@ -207,6 +211,7 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
         shutil.rmtree(staging, ignore_errors=True)
         shield.close()
         torch.set_num_threads(threads)
+        torch.set_grad_enabled(grad)
         cv2.setNumThreads(cv2_threads)
     return summary
 

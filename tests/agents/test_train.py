@@ -47,6 +47,20 @@ def test_short_ppo_training_improves_the_return(tmp_path) -> None:
     assert after > before + 50.0, (before, after)
 
 
+def test_training_works_with_gradients_off_and_leaves_the_mode_as_it_was(tmp_path) -> None:
+    """A caller (or an earlier run cut by Ctrl-C inside torch's no_grad) with gradients
+    off: training turns them on for itself and gives the caller its mode back."""
+    config = PpoConfig(n_steps=64, batch_size=32, n_epochs=1)
+    torch.set_grad_enabled(False)
+    try:
+        summary = train(64, 1, 0, tmp_path / "run", config=config, progress=False,
+                        subprocess=False, track="oval")
+        assert not torch.is_grad_enabled()
+    finally:
+        torch.set_grad_enabled(True)
+    assert summary["timesteps_done"] >= 64 and (tmp_path / "run" / "policy.zip").is_file()
+
+
 def test_config_reaches_the_model_and_the_run_reports_its_rate(tmp_path) -> None:
     """The exploration noise and the learning-rate decay of PpoConfig are the saved
     model's; train.json has the rate; the caller's torch threads are left as they were."""

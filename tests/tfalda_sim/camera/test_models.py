@@ -61,10 +61,15 @@ def test_real_calibration_plugs_in_unchanged() -> None:
         t = np.array([rng.uniform(-0.25, 0.05), rng.uniform(-0.2, 0.0), rng.uniform(0.3, 0.6)])
         obj.append(grid.reshape(1, -1, 3).astype(np.float32))
         img.append(truth.project(grid @ R.T + t).reshape(1, -1, 2).astype(np.float32))
-    # Flag values of OpenCV's fisheye enum (OpenCV 5 no longer exports their names):
-    # 2 = recompute extrinsics, 8 = fix skew.
+    # Recompute extrinsics, fix skew. OpenCV 5.1 exports the names again, with the unified
+    # cv::CALIB_* values it now requires; 5.0 exported none and took its fisheye enum's
+    # own values (2 and 8).
+    if hasattr(cv2.fisheye, "CALIB_RECOMPUTE_EXTRINSIC"):
+        flags = cv2.fisheye.CALIB_RECOMPUTE_EXTRINSIC | cv2.fisheye.CALIB_FIX_SKEW
+    else:
+        flags = 2 | 8
     _, K, D, _, _ = cv2.fisheye.calibrate(obj, img, (752, 480), np.zeros((3, 3)),
-                                          np.zeros((4, 1)), flags=2 | 8)
+                                          np.zeros((4, 1)), flags=flags)
     assert K.shape == (3, 3) and D.shape == (4, 1)
     cam = FisheyeCamera(K, D)
     pts = points_in_view(rng, 2000)
