@@ -289,27 +289,44 @@ def _raster_kernel(
     special_reach = half_road + stop_w + 0.5 * start_w + 2.0 * res
     spans = np.empty((6, 2), np.int64)  # a row's column spans [lo, hi] (empty: lo > hi)
     gap_ids = np.empty(len(gap_line), np.int64)  # the rule gaps near a chunk
+    # The tiles to paint lie in these tile rows and columns: most chunks are rejected by
+    # four comparisons (a view paints a few tiles of a map's ~10³).
+    tr_min, tr_max, tc_min, tc_max = todo.shape[0], -1, todo.shape[1], -1
+    for tr in range(todo.shape[0]):
+        for tc in range(todo.shape[1]):
+            if todo[tr, tc]:
+                tr_min, tr_max = min(tr_min, tr), tr
+                tc_min, tc_max = min(tc_min, tc), max(tc_max, tc)
     k_chunk = 0  # the chunk's row of ``boxes``
     for j in range(len(length)):
         n_chunks = max(1, int(math.ceil(length[j] / chunk_m)))
-        ch = math.cos(h0[j])
-        sh = math.sin(h0[j])
         arc = kappa[j] != 0.0
-        if arc:
-            inv = 1.0 / kappa[j]
-            sign = 1.0 if kappa[j] > 0.0 else -1.0
-            radius = abs(inv)
-            cx = x0[j] - sh * inv
-            cy = y0[j] + ch * inv
-            phi0 = math.atan2(y0[j] - cy, x0[j] - cx)
+        ready = False  # the segment's constants, computed once a chunk of it is painted
+        ch = sh = inv = sign = radius = cx = cy = phi0 = 0.0
         for c in range(n_chunks):
+            r_lo = boxes[k_chunk, 0]
+            r_hi = boxes[k_chunk, 1]
+            c_lo = boxes[k_chunk, 2]
+            c_hi = boxes[k_chunk, 3]
+            k_chunk += 1
+            if (r_hi // tile < tr_min or r_lo // tile > tr_max or c_hi // tile < tc_min
+                    or c_lo // tile > tc_max
+                    or not _any_tile(todo, tile, r_lo, r_hi, c_lo, c_hi)):
+                continue
+            if not ready:
+                ready = True
+                ch = math.cos(h0[j])
+                sh = math.sin(h0[j])
+                if arc:
+                    inv = 1.0 / kappa[j]
+                    sign = 1.0 if kappa[j] > 0.0 else -1.0
+                    radius = abs(inv)
+                    cx = x0[j] - sh * inv
+                    cy = y0[j] + ch * inv
+                    phi0 = math.atan2(y0[j] - cy, x0[j] - cx)
             ua = length[j] * c / n_chunks
             ub = length[j] * (c + 1) / n_chunks
             last = c == n_chunks - 1
-            r_lo, r_hi, c_lo, c_hi = boxes[k_chunk]
-            k_chunk += 1
-            if not _any_tile(todo, tile, r_lo, r_hi, c_lo, c_hi):
-                continue
             has_special = False
             for sp in special:
                 lo_s = s0[j] + ua - special_reach
@@ -328,8 +345,11 @@ def _raster_kernel(
                         break
             # A plain chunk (no crossing marking, no rule gap, no labels): a pixel near
             # the right or left line holds that line's share across the road, whatever
-            # its arc length (``_paint_pixel`` multiplies it by exactly 1.0 here).
+            # its arc length (``_paint_pixel`` multiplies it by exactly 1.0 here); one near
+            # the centre line holds its share across times the dashes' share along, and
+            # nothing of the other lines. The same expressions as ``_paint_pixel``'s.
             plain = not has_special and n_gaps == 0 and not with_labels and lines_apart
+            across = 0.0
             if arc:
                 # The chunk's sector of the annulus |d| <= pad, as two half-planes through
                 # the centre (when the sector is convex), loosened by ARC_CLIP_SLACK_PX.
@@ -339,96 +359,138 @@ def _raster_kernel(
                 phi_b = phi0 + sign * ub / radius
                 ax_, ay_ = math.cos(phi_a), math.sin(phi_a)
                 bx_, by_ = math.cos(phi_b), math.sin(phi_b)
-            for r in range(r_lo, r_hi + 1):
-                tile_row = todo[r // tile]
-                py = oy - (r + 0.5) * res
-                # The row's column spans that can hold a painted pixel: the whole road
-                # band where a crossing marking may be, else only the bands around the
-                # three lines (the per-pixel test below rejects everything else anyway).
-                n_sp = 0
-                if arc:
-                    for li in range(1 if has_special else 3):
-                        if has_special:
-                            r_in, r_out = radius - pad - slack, radius + pad + slack
-                        else:
-                            rc = radius - sign * (li - 1) * lane_w
-                            r_in, r_out = rc - line_reach - slack, rc + line_reach + slack
-                        a0, a1, b0, b1 = _arc_row_spans(
-                            py - cy, cx, ox, res, r_in, r_out, wedge, ax_, ay_, bx_, by_, sign,
-                            slack, c_lo, c_hi)
-                        spans[n_sp, 0], spans[n_sp, 1] = a0, a1
-                        spans[n_sp + 1, 0], spans[n_sp + 1, 1] = b0, b1
-                        n_sp += 2
-                else:
-                    # u and d are linear in x along a row: clip the row to the chunk's band.
-                    dy = py - y0[j]
-                    u_lo, u_hi = _linear_span(ch, dy * sh, ua, ub, x0[j], ox, res, c_lo, c_hi)
-                    for li in range(1 if has_special else 3):
-                        if has_special:
-                            d_lo, d_hi = -pad, pad
-                        else:
-                            dl = (li - 1) * lane_w
-                            d_lo, d_hi = dl - line_reach, dl + line_reach
-                        q0, q1 = _linear_span(-sh, dy * ch, d_lo, d_hi, x0[j], ox, res, u_lo,
-                                              u_hi)
-                        spans[n_sp, 0], spans[n_sp, 1] = q0, q1
-                        n_sp += 1
-                for span in range(n_sp):
-                    q_run = spans[span, 0]
-                    span_hi = spans[span, 1]
-                    while q_run <= span_hi:  # the span's runs through one tile each
-                        tc = q_run // tile
-                        q_end = min(span_hi, (tc + 1) * tile - 1)
-                        first = q_run
-                        q_run = q_end + 1
-                        if not tile_row[tc]:
-                            continue
-                        for q in range(first, q_end + 1):
-                            px = ox + (q + 0.5) * res
-                            if arc:
-                                vx = px - cx
-                                vy = py - cy
-                                hv = math.hypot(vx, vy)
-                                d = sign * (radius - hv)
-                                if abs(d) > pad or not (has_special
-                                                        or _near_line(d, lane_w, line_reach)):
-                                    continue
-                                side = plain and abs(abs(d) - lane_w) <= line_reach
-                                # Well inside the chunk's sector (by far more than rounding
-                                # moves an angle), its arc length is inside [ua, ub): no
-                                # atan2 for a pixel whose value does not depend on it.
-                                if not (side and wedge
-                                        and sign * (ax_ * vy - ay_ * vx) > INSIDE_MARGIN * hv
-                                        and sign * (vx * by_ - vy * bx_) > INSIDE_MARGIN * hv):
-                                    u = ((sign * (math.atan2(vy, vx) - phi0))
-                                         % (2.0 * math.pi)) * radius
+            tc_lo = c_lo // tile
+            tc_hi = c_hi // tile
+            # Row by row, but tile row by tile row first: the rows of a tile row with no
+            # tile to paint inside the chunk's columns are skipped whole (a chunk's box is
+            # ~4 tiles high, a view needs a few tiles).
+            for tr in range(r_lo // tile, r_hi // tile + 1):
+                tile_row = todo[tr]
+                if not _span_live(tile_row, tile, tc_lo * tile, tc_hi * tile):
+                    continue
+                for r in range(max(r_lo, tr * tile), min(r_hi, (tr + 1) * tile - 1) + 1):
+                    py = oy - (r + 0.5) * res
+                    # The row's column spans that can hold a painted pixel: the whole road
+                    # band where a crossing marking may be, else only the bands around the
+                    # three lines (the per-pixel test below rejects everything else anyway).
+                    n_sp = 0
+                    if arc:
+                        if not has_special:
+                            # Most rows of a chunk's box reach no tile to paint (a view needs a
+                            # few tiles; ~6 rows in 7 here): the road band's spans, which hold
+                            # the lines' (the same monotone bounds of wider radii), say so for
+                            # one span computation instead of three.
+                            a0, a1, b0, b1 = _arc_row_spans(
+                                py - cy, cx, ox, res, radius - pad - slack, radius + pad + slack,
+                                wedge, ax_, ay_, bx_, by_, sign, slack, c_lo, c_hi)
+                            if not (_span_live(tile_row, tile, a0, a1)
+                                    or _span_live(tile_row, tile, b0, b1)):
+                                continue
+                        for li in range(1 if has_special else 3):
+                            if has_special:
+                                r_in, r_out = radius - pad - slack, radius + pad + slack
+                            else:
+                                rc = radius - sign * (li - 1) * lane_w
+                                r_in, r_out = rc - line_reach - slack, rc + line_reach + slack
+                            a0, a1, b0, b1 = _arc_row_spans(
+                                py - cy, cx, ox, res, r_in, r_out, wedge, ax_, ay_, bx_, by_, sign,
+                                slack, c_lo, c_hi)
+                            spans[n_sp, 0], spans[n_sp, 1] = a0, a1
+                            spans[n_sp + 1, 0], spans[n_sp + 1, 1] = b0, b1
+                            n_sp += 2
+                    else:
+                        # u and d are linear in x along a row: clip the row to the chunk's band.
+                        dy = py - y0[j]
+                        u_lo, u_hi = _linear_span(ch, dy * sh, ua, ub, x0[j], ox, res, c_lo, c_hi)
+                        if not has_special:  # as for arcs: the road band first
+                            q0, q1 = _linear_span(-sh, dy * ch, -pad, pad, x0[j], ox, res, u_lo,
+                                                  u_hi)
+                            if not _span_live(tile_row, tile, q0, q1):
+                                continue
+                        for li in range(1 if has_special else 3):
+                            if has_special:
+                                d_lo, d_hi = -pad, pad
+                            else:
+                                dl = (li - 1) * lane_w
+                                d_lo, d_hi = dl - line_reach, dl + line_reach
+                            q0, q1 = _linear_span(-sh, dy * ch, d_lo, d_hi, x0[j], ox, res, u_lo,
+                                                  u_hi)
+                            spans[n_sp, 0], spans[n_sp, 1] = q0, q1
+                            n_sp += 1
+                    for span in range(n_sp):
+                        q_run = spans[span, 0]
+                        span_hi = spans[span, 1]
+                        while q_run <= span_hi:  # the span's runs through one tile each
+                            tc = q_run // tile
+                            q_end = min(span_hi, (tc + 1) * tile - 1)
+                            first = q_run
+                            q_run = q_end + 1
+                            if not tile_row[tc]:
+                                continue
+                            for q in range(first, q_end + 1):
+                                px = ox + (q + 0.5) * res
+                                if arc:
+                                    vx = px - cx
+                                    vy = py - cy
+                                    hv = math.hypot(vx, vy)
+                                    d = sign * (radius - hv)
+                                    if abs(d) > pad or not (has_special
+                                                            or _near_line(d, lane_w, line_reach)):
+                                        continue
+                                    side = plain and abs(abs(d) - lane_w) <= line_reach
+                                    centre = plain and abs(d) <= line_reach
+                                    if centre:
+                                        across = _band(d, -0.5 * line_w, 0.5 * line_w, res)
+                                        if across == 0.0:
+                                            continue  # nothing to paint: no atan2
+                                    # Well inside the chunk's sector (by far more than rounding
+                                    # moves an angle), its arc length is inside [ua, ub): no
+                                    # atan2 for a pixel whose value does not depend on it.
+                                    if not (side and wedge
+                                            and sign * (ax_ * vy - ay_ * vx) > INSIDE_MARGIN * hv
+                                            and sign * (vx * by_ - vy * bx_) > INSIDE_MARGIN * hv):
+                                        u = ((sign * (math.atan2(vy, vx) - phi0))
+                                             % (2.0 * math.pi)) * radius
+                                        if u < ua or u > ub or (u == ub and not last):
+                                            continue
+                                else:
+                                    dx = px - x0[j]
+                                    dy = py - y0[j]
+                                    d = -dx * sh + dy * ch
+                                    if abs(d) > pad or not (has_special
+                                                            or _near_line(d, lane_w, line_reach)):
+                                        continue
+                                    side = plain and abs(abs(d) - lane_w) <= line_reach
+                                    centre = plain and abs(d) <= line_reach
+                                    if centre:
+                                        across = _band(d, -0.5 * line_w, 0.5 * line_w, res)
+                                        if across == 0.0:
+                                            continue
+                                    u = dx * ch + dy * sh
                                     if u < ua or u > ub or (u == ub and not last):
                                         continue
-                            else:
-                                dx = px - x0[j]
-                                dy = py - y0[j]
-                                d = -dx * sh + dy * ch
-                                if abs(d) > pad or not (has_special
-                                                        or _near_line(d, lane_w, line_reach)):
+                                if side:  # ``_paint_pixel``'s value, its expressions as they are
+                                    dl = lane_w if d > 0.0 else -lane_w
+                                    across = _band(d, dl - 0.5 * line_w, dl + 0.5 * line_w, res)
+                                    value = int(min(1.0, across) * 255.0 + 0.5)
+                                    if value > intensity[r, q]:
+                                        intensity[r, q] = value
                                     continue
-                                side = plain and abs(abs(d) - lane_w) <= line_reach
-                                u = dx * ch + dy * sh
-                                if u < ua or u > ub or (u == ub and not last):
+                                s = s0[j] + u
+                                if closed and s >= total:
+                                    s -= total
+                                if centre:  # likewise for the centre line's dashes
+                                    along = (_dash_integral(s + 0.5 * res, dash, period)
+                                             - _dash_integral(s - 0.5 * res, dash, period))
+                                    paint = across * (along / res)
+                                    value = int(min(1.0, max(0.0, paint)) * 255.0 + 0.5)
+                                    if value > intensity[r, q]:
+                                        intensity[r, q] = value
                                     continue
-                            if side:  # ``_paint_pixel``'s value, its expressions as they are
-                                dl = lane_w if d > 0.0 else -lane_w
-                                across = _band(d, dl - 0.5 * line_w, dl + 0.5 * line_w, res)
-                                value = int(min(1.0, across) * 255.0 + 0.5)
-                                if value > intensity[r, q]:
-                                    intensity[r, q] = value
-                                continue
-                            s = s0[j] + u
-                            if closed and s >= total:
-                                s -= total
-                            _paint_pixel(intensity, labels, r, q, s, d, res, total, closed, lane_w,
-                                         line_w, dash, period, gap_line, gap_lo, gap_hi,
-                                         gap_ids, n_gaps, passes, start_s, start_w, stop_w,
-                                         has_special, with_labels)
+                                _paint_pixel(intensity, labels, r, q, s, d, res, total, closed,
+                                             lane_w, line_w, dash, period, gap_line, gap_lo,
+                                             gap_hi, gap_ids, n_gaps, passes, start_s,
+                                             start_w, stop_w, has_special, with_labels)
 
 
 _LINE_INDEX = {"right": 0, "centre": 1, "left": 2}
@@ -509,6 +571,18 @@ def _arc_row_spans(vy: float, cx: float, ox: float, res: float, r_in: float, r_o
         q2 = (max(c_lo, int(math.floor((lo2 - ox) / res - 0.5))),
               min(c_hi, int(math.ceil((hi2 - ox) / res - 0.5))))
     return q1[0], q1[1], q2[0], q2[1]
+
+
+@njit(cache=True)
+def _span_live(tile_row: np.ndarray, tile: int, lo: int, hi: int) -> bool:
+    """Whether the columns ``lo … hi`` (empty if lo > hi) of a row meet a tile of
+    ``tile_row`` (a row of ``todo``)."""
+    if lo > hi:
+        return False
+    for tc in range(lo // tile, hi // tile + 1):
+        if tile_row[tc]:
+            return True
+    return False
 
 
 @njit(cache=True)
