@@ -3,6 +3,8 @@ Gymnasium's SyncVectorEnv bit for bit, and fails cleanly."""
 
 from __future__ import annotations
 
+import math
+import time
 from typing import Any
 
 import gymnasium as gym
@@ -237,3 +239,81 @@ def test_a_ctrl_c_in_this_processs_env_keeps_the_pipes_in_step() -> None:
         assert obs.shape == (2, 42)
     finally:
         venv.close()
+
+
+def test_steps_go_through_the_board_and_equal_the_pipes_and_sync() -> None:
+    """On x86 the workers take steps from the shared board: only a worker's first step
+    (its infos' layout is not known yet) comes through the pipe; with the board off (as
+    on other machines), after a pause past the workers' spin, and with int actions (the
+    pipe path), the rollouts equal SyncVectorEnv's."""
+    from tfalda_sim.envs import vector
+
+    def run(venv: gym.vector.VectorEnv, pause: bool = False) -> list[Any]:
+        out: list[Any] = [venv.reset(seed=4)]
+        rng = np.random.default_rng(4)
+        for k in range(40):
+            if pause and k in (5, 6):
+                time.sleep(3 * vector.WAIT_SPIN_S)  # the workers nap between board looks
+            action = rng.uniform(-0.2, 1.0, (3, 1)).astype(np.float32)
+            out.append(venv.step(np.rint(action).astype(np.int64) if k == 7 else action))
+        return out
+
+    sync = gym.make_vec("TfaldaTrack-v0", num_envs=3, vectorization_mode="sync",
+                        max_laps=1)
+    want = run(sync)
+    sync.close()
+    ours = TfaldaTrackVectorEnv(3, workers=3, max_laps=1)
+    try:
+        got = run(ours, pause=True)
+        if vector.FAST_STEPS:
+            assert ours._board is not None
+            assert ours._piped == 2  # each worker's first step, then the board
+    finally:
+        ours.close()
+    assert_same(got, want)
+    assert any(np.any(step[2] | step[3]) for step in got[1:])  # autoresets happened
+    real = vector.FAST_STEPS
+    vector.FAST_STEPS = False
+    try:
+        piped = TfaldaTrackVectorEnv(3, workers=3, max_laps=1)
+        assert piped._board is None
+        got = run(piped)
+        piped.close()
+    finally:
+        vector.FAST_STEPS = real
+    assert_same(got, want)
+
+
+def test_the_board_carries_infos_exactly_or_refuses_them() -> None:
+    import multiprocessing
+
+    from tfalda_sim.envs.vector import (
+        BOARD_INFO_SLOTS,
+        _Board,
+        _layout,
+        _post_results,
+        _read_results,
+    )
+
+    board = _Board(multiprocessing.get_context("spawn"), 3, (1,), 2)
+    infos = [{"x": 0.1, "n": 2**62, "ok": True, "track": "oval", "y": -0.0},
+             {"x": math.nextafter(1.0, 2.0), "n": -5, "ok": False, "track": "oval",
+              "y": math.nan, "z": math.inf}]
+    answers = [(0.5, False, True, infos[0]), (-1.25, True, False, infos[1])]
+    known: list[tuple | None] = [None, _layout(infos[0]), _layout(infos[1])]
+    assert _post_results(board, 1, answers, known[1:])
+    got = _read_results(board, 1, 3, known)
+    for (reward, term, trunc, info), want in zip(got, answers, strict=True):
+        assert (reward, term, trunc) == want[:3]
+        assert repr(list(info.items())) == repr(list(want[3].items()))  # nan, -0.0 too
+        assert [type(v) for v in info.values()] == [type(v) for v in want[3].values()]
+    # Anything but the known layout is refused (the pipe carries it): another key order,
+    # type or string, an int beyond int64, an array, too many numbers.
+    for bad in ({"n": 2, "x": 0.1, "ok": True, "track": "oval", "y": 0.0},
+                {"x": 1, "n": 2, "ok": True, "track": "oval", "y": 0.0},
+                {"x": 0.1, "n": 2, "ok": True, "track": "thesis", "y": 0.0},
+                {"x": 0.1, "n": 2**64, "ok": True, "track": "oval", "y": 0.0}):
+        assert not _post_results(board, 1, [(0.0, False, False, bad)], known[1:2])
+    assert _layout({"a": np.zeros(2)}) is None
+    assert _layout({f"k{i}": 1.0 for i in range(BOARD_INFO_SLOTS + 1)}) is None
+    assert _layout({f"k{i}": 1.0 for i in range(BOARD_INFO_SLOTS)}) is not None
