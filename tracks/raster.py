@@ -287,7 +287,25 @@ def _raster_kernel(
     for sx in passes:
         special.append(sx)
     special_reach = half_road + stop_w + 0.5 * start_w + 2.0 * res
-    spans = np.empty((6, 2), np.int64)  # a row's column spans [lo, hi] (empty: lo > hi)
+    # The arc-length bands [m] of the road where a crossing marking paints (its paint
+    # ends half a pixel past them, two pixels of room here).
+    n_bands = (1 if start_s == start_s else 0) + 2 * len(passes)
+    bands = np.empty((n_bands, 2))
+    m = 0
+    if start_s == start_s:
+        bands[0, 0] = start_s - 0.5 * start_w - 2.0 * res
+        bands[0, 1] = start_s + 0.5 * start_w + 2.0 * res
+        m = 1
+    for sx in passes:
+        bands[m, 0] = sx - half_road - stop_w - 2.0 * res
+        bands[m, 1] = sx - half_road + 2.0 * res
+        bands[m + 1, 0] = sx + half_road - 2.0 * res
+        bands[m + 1, 1] = sx + half_road + stop_w + 2.0 * res
+        m += 2
+    iv = np.empty((3 * n_bands, 2))  # a chunk's share of them (u [m]), each shift
+    iv_rays = np.empty((3 * n_bands, 4))  # on an arc: the rays to their ends
+    # a row's column spans [lo, hi] (empty: lo > hi): two per line and band on an arc
+    spans = np.empty((6 + 2 * len(iv), 2), np.int64)
     gap_ids = np.empty(len(gap_line), np.int64)  # the rule gaps near a chunk
     # The tiles to paint lie in these tile rows and columns: most chunks are rejected by
     # four comparisons (a view paints a few tiles of a map's ~10³).
@@ -334,6 +352,25 @@ def _raster_kernel(
                 for shift in (-total, 0.0, total):
                     if lo_s <= sp + shift <= hi_s:
                         has_special = True
+            # The chunk's arc lengths (as u) where a crossing marking paints the road
+            # band: the start line, the stop lines before and after each crossing (its
+            # cut of the lines only changes line pixels, which the line spans hold).
+            n_iv = 0
+            if has_special:
+                for m in range(len(bands)):
+                    for shift in (-total, 0.0, total):
+                        lo_u = max(ua, bands[m, 0] + shift - s0[j])
+                        hi_u = min(ub, bands[m, 1] + shift - s0[j])
+                        if lo_u <= hi_u:
+                            iv[n_iv, 0], iv[n_iv, 1] = lo_u, hi_u
+                            if arc:  # the rays to its ends, as for the chunk's sector
+                                phi_lo = phi0 + sign * lo_u / radius
+                                phi_hi = phi0 + sign * hi_u / radius
+                                iv_rays[n_iv, 0] = math.cos(phi_lo)
+                                iv_rays[n_iv, 1] = math.sin(phi_lo)
+                                iv_rays[n_iv, 2] = math.cos(phi_hi)
+                                iv_rays[n_iv, 3] = math.sin(phi_hi)
+                            n_iv += 1
             n_gaps = 0
             for g in range(len(gap_line)):  # gaps whose pixels reach the chunk
                 lo_s = s0[j] + ua - 2.0 * res
@@ -370,31 +407,33 @@ def _raster_kernel(
                     continue
                 for r in range(max(r_lo, tr * tile), min(r_hi, (tr + 1) * tile - 1) + 1):
                     py = oy - (r + 0.5) * res
-                    # The row's column spans that can hold a painted pixel: the whole road
-                    # band where a crossing marking may be, else only the bands around the
-                    # three lines (the per-pixel test below rejects everything else anyway).
+                    # The row's column spans that can hold a painted pixel: the bands around the
+                    # three lines, and the road band where a crossing marking may be painted (the
+                    # per-pixel test below rejects everything else anyway; a pixel in two spans
+                    # is painted twice, the same value).
                     n_sp = 0
                     if arc:
-                        if not has_special:
-                            # Most rows of a chunk's box reach no tile to paint (a view needs a
-                            # few tiles; ~6 rows in 7 here): the road band's spans, which hold
-                            # the lines' (the same monotone bounds of wider radii), say so for
-                            # one span computation instead of three.
-                            a0, a1, b0, b1 = _arc_row_spans(
-                                py - cy, cx, ox, res, radius - pad - slack, radius + pad + slack,
-                                wedge, ax_, ay_, bx_, by_, sign, slack, c_lo, c_hi)
-                            if not (_span_live(tile_row, tile, a0, a1)
-                                    or _span_live(tile_row, tile, b0, b1)):
-                                continue
-                        for li in range(1 if has_special else 3):
-                            if has_special:
-                                r_in, r_out = radius - pad - slack, radius + pad + slack
-                            else:
+                        # Most rows of a chunk's box reach no tile to paint (a view needs a
+                        # few tiles; ~6 rows in 7 here): the road band's spans, which hold
+                        # all the others (monotone bounds of wider radii), say so first.
+                        r_in, r_out = radius - pad - slack, radius + pad + slack
+                        a0, a1, b0, b1 = _arc_row_spans(py - cy, cx, ox, res, r_in, r_out, wedge,
+                                                        ax_, ay_, bx_, by_, sign, slack, c_lo, c_hi)
+                        if not (_span_live(tile_row, tile, a0, a1)
+                                or _span_live(tile_row, tile, b0, b1)):
+                            continue
+                        for li in range(3 + n_iv):
+                            if li < 3:  # a line's band, the chunk's sector
                                 rc = radius - sign * (li - 1) * lane_w
-                                r_in, r_out = rc - line_reach - slack, rc + line_reach + slack
-                            a0, a1, b0, b1 = _arc_row_spans(
-                                py - cy, cx, ox, res, r_in, r_out, wedge, ax_, ay_, bx_, by_, sign,
-                                slack, c_lo, c_hi)
+                                a0, a1, b0, b1 = _arc_row_spans(
+                                    py - cy, cx, ox, res, rc - line_reach - slack,
+                                    rc + line_reach + slack, wedge, ax_, ay_, bx_, by_, sign, slack,
+                                    c_lo, c_hi)
+                            else:  # the road band, a crossing marking's sector
+                                ray = iv_rays[li - 3]
+                                a0, a1, b0, b1 = _arc_row_spans(
+                                    py - cy, cx, ox, res, r_in, r_out, True, ray[0], ray[1], ray[2],
+                                    ray[3], sign, slack, c_lo, c_hi)
                             spans[n_sp, 0], spans[n_sp, 1] = a0, a1
                             spans[n_sp + 1, 0], spans[n_sp + 1, 1] = b0, b1
                             n_sp += 2
@@ -402,19 +441,19 @@ def _raster_kernel(
                         # u and d are linear in x along a row: clip the row to the chunk's band.
                         dy = py - y0[j]
                         u_lo, u_hi = _linear_span(ch, dy * sh, ua, ub, x0[j], ox, res, c_lo, c_hi)
-                        if not has_special:  # as for arcs: the road band first
-                            q0, q1 = _linear_span(-sh, dy * ch, -pad, pad, x0[j], ox, res, u_lo,
-                                                  u_hi)
-                            if not _span_live(tile_row, tile, q0, q1):
-                                continue
-                        for li in range(1 if has_special else 3):
-                            if has_special:
-                                d_lo, d_hi = -pad, pad
-                            else:
+                        q0, q1 = _linear_span(-sh, dy * ch, -pad, pad, x0[j], ox, res, u_lo, u_hi)
+                        if not _span_live(tile_row, tile, q0, q1):  # as for arcs
+                            continue
+                        for li in range(3 + n_iv):
+                            if li < 3:
                                 dl = (li - 1) * lane_w
-                                d_lo, d_hi = dl - line_reach, dl + line_reach
-                            q0, q1 = _linear_span(-sh, dy * ch, d_lo, d_hi, x0[j], ox, res, u_lo,
-                                                  u_hi)
+                                q0, q1 = _linear_span(-sh, dy * ch, dl - line_reach,
+                                                      dl + line_reach, x0[j], ox, res, u_lo, u_hi)
+                            else:
+                                v_lo, v_hi = _linear_span(ch, dy * sh, iv[li - 3, 0], iv[li - 3, 1],
+                                                          x0[j], ox, res, u_lo, u_hi)
+                                q0, q1 = _linear_span(-sh, dy * ch, -pad, pad, x0[j], ox, res, v_lo,
+                                                      v_hi)
                             spans[n_sp, 0], spans[n_sp, 1] = q0, q1
                             n_sp += 1
                     for span in range(n_sp):
