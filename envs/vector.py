@@ -138,6 +138,7 @@ class TfaldaTrackVectorEnv(VectorEnv):
         self._seq = 0  # the last step posted on it
         self._known: list[tuple | None] = [None] * self.num_envs  # info layouts (_layout)
         self._piped = 0  # posted steps whose results a worker sent through its pipe
+        self._stale = False  # a step's answers were given up on (read them before the board)
         self.closed = False
         self._local: list[gym.Env] = [probe] + [
             gym.make(ENV_ID, **self._kwargs) for _ in range(1, int(self._slices[1]))]
@@ -204,7 +205,11 @@ class TfaldaTrackVectorEnv(VectorEnv):
         answers, error = [], None
         for w, conn in enumerate(self._conns):
             try:
-                ok, data = _receive(conn, WAIT_SPIN_S)
+                message = _receive(conn, WAIT_SPIN_S)
+                while len(message) == 3:  # a posted step's answer, read late (a Ctrl-C)
+                    self._learn(w + 1, message)
+                    message = _receive(conn, WAIT_SPIN_S)
+                ok, data = message
             except (EOFError, ConnectionError):
                 ok, data = False, ("RuntimeError", f"worker {w + 1} of the vector env died "
                                    f"(exit code {self._procs[w].exitcode})", "")
@@ -257,26 +262,44 @@ class TfaldaTrackVectorEnv(VectorEnv):
         board = self._board
         assert board is not None
         parts, error = [], None
+        stale, self._stale = self._stale, True  # until every answer is in (a Ctrl-C…)
         for w, conn in enumerate(self._conns, start=1):
             start, stop = int(self._slices[w]), int(self._slices[w + 1])
             try:
-                got = _await_answer(conn, board, w, self._seq)
+                message = _await_answer(conn, board, w, self._seq)
+                # Pipe messages to other commands or steps than this one are answers this
+                # process gave up on (a Ctrl-C while it waited): dropped, but the layouts
+                # a worker sent are learnt (it learnt them as it sent them).
+                while message is not None and (len(message) != 3 or message[2] != self._seq):
+                    self._learn(w, message)
+                    message = _await_answer(conn, board, w, self._seq)
             except (EOFError, ConnectionError):
-                got = (False, ("RuntimeError", f"worker {w} of the vector env died (exit "
-                               f"code {self._procs[w - 1].exitcode})", ""))
-            if got is None:
+                message = (False, ("RuntimeError", f"worker {w} of the vector env died (exit "
+                                   f"code {self._procs[w - 1].exitcode})", ""), self._seq)
+            if message is None:
+                if stale:  # a pipe answer to a step given up on is in the pipe by now
+                    while conn.poll(0):
+                        self._learn(w, conn.recv())
                 parts.append(_read_results(board, start, stop, self._known))
                 continue
-            ok, data = got
-            if ok:  # the worker learnt these layouts as it sent them: so does this process
+            ok, data, _ = message
+            if ok:
                 self._piped += 1
-                self._known[start:stop] = [_layout(answer[3]) for answer in data]
+                self._learn(w, message)
                 parts.append(data)
             elif error is None:
                 error = data
+        self._stale = False
         if error is not None:
             self._raise("step", error)
         return parts
+
+    def _learn(self, lane: int, message: tuple) -> None:
+        """The info layouts of worker ``lane``'s envs from its pipe answer to a posted
+        step (the worker learnt them as it sent it); other messages teach nothing."""
+        if len(message) == 3 and message[0]:
+            start, stop = int(self._slices[lane]), int(self._slices[lane + 1])
+            self._known[start:stop] = [_layout(answer[3]) for answer in message[1]]
 
     def _indices(self, indices: Sequence[int]) -> list[int]:
         """``indices`` as a list of env numbers, each checked to be one of ours."""
@@ -714,21 +737,17 @@ def _read_results(board: _Board, start: int, stop: int, known: list[tuple | None
     return out
 
 
-def _await_answer(conn: Connection, board: _Board, lane: int, seq: int
-                  ) -> tuple[bool, Any] | None:
+def _await_answer(conn: Connection, board: _Board, lane: int, seq: int) -> Any:
     """Wait for worker ``lane``'s results of step ``seq``: None when they are on the
-    board, else its pipe answer ``(ok, data)`` (an error, or infos the board cannot
-    hold). Spins: the worker is stepping on another core. A dead worker's pipe raises
-    EOFError here."""
+    board, else the next message on its pipe (its answer ``(ok, data, seq)``: an error,
+    or infos the board cannot hold; or an older answer). Spins: the worker is stepping on
+    another core. A dead worker's pipe raises EOFError here."""
     done = board.ctrl
     while True:
         if done[1 + lane] == seq:
             return None
         if conn.poll(0):
-            message = conn.recv()
-            if len(message) == 3 and message[2] == seq:
-                return message[0], message[1]
-            continue  # the answer to a step interrupted here earlier: dropped
+            return conn.recv()
         os.sched_yield()
 
 

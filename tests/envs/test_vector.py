@@ -317,3 +317,47 @@ def test_the_board_carries_infos_exactly_or_refuses_them() -> None:
     assert _layout({"a": np.zeros(2)}) is None
     assert _layout({f"k{i}": 1.0 for i in range(BOARD_INFO_SLOTS + 1)}) is None
     assert _layout({f"k{i}": 1.0 for i in range(BOARD_INFO_SLOTS)}) is not None
+
+
+def test_a_ctrl_c_while_waiting_for_a_worker_keeps_the_board_in_step(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A KeyboardInterrupt while this process waits for a worker's posted step: the
+    worker's answer (here through the pipe, its first: it teaches the info layouts) is
+    read before the next step's results are taken from the board, which equal
+    SyncVectorEnv's."""
+    from tfalda_sim.envs import vector
+
+    venv = TfaldaTrackVectorEnv(2, workers=2, track="oval")
+    sync = gym.make_vec("TfaldaTrack-v0", num_envs=2, vectorization_mode="sync", track="oval")
+    try:
+        if venv._board is None:
+            pytest.skip("no step board on this machine (pipes only)")
+        venv.reset(seed=2)
+        sync.reset(seed=2)
+        first, second = np.full((2, 1), 0.3, np.float32), np.full((2, 1), -0.2, np.float32)
+        real = vector._await_answer
+
+        def interrupted(*args: Any) -> Any:
+            monkeypatch.setattr(vector, "_await_answer", real)
+            raise KeyboardInterrupt
+
+        monkeypatch.setattr(vector, "_await_answer", interrupted)
+        with pytest.raises(KeyboardInterrupt):
+            venv.step(first)
+        sync.step(first)
+        env0 = venv._local[0]
+        step0 = env0.step
+
+        def slow(action: Any) -> Any:  # the worker's results are on the board by now
+            env0.step = step0
+            time.sleep(0.2)
+            return step0(action)
+
+        env0.step = slow
+        assert_same(venv.step(second), sync.step(second))
+        assert venv._piped == 0  # the first answer came late, the second by the board
+        for _ in range(3):
+            assert_same(venv.step(first), sync.step(first))
+    finally:
+        venv.close()
+        sync.close()
