@@ -57,14 +57,19 @@ _PR_SET_PDEATHSIG = 1  # linux/prctl.h
 
 WAIT_SPIN_S = 0.002
 """How long [s] a worker polls for its next command (and this process for the workers'
-answers) before blocking. The wait between two steps is this process's own env step plus
+answers to other commands than steps: it spins for a step's, the workers are stepping)
+before blocking. The wait between two steps is this process's own env step plus
 its overhead (≈ 1.5–2.5 ms); a process that blocks instead lets its core sleep, and on this
 VM a woken core then stepped ≈ 30 % slower (cold caches) — 740 vs 810 steps/s with 2 envs.
 Past the spin it blocks, so a long pause (a PPO update) costs ≤ 2 ms of a core per step."""
 
-BOARD_POLL_S = 0.001
-"""A worker idle for longer than ``WAIT_SPIN_S`` looks at the step board this often [s]
-(a posted step waits at most this long after a pause, e.g. a PPO update)."""
+BOARD_NAP_S = 0.05
+"""A worker idle past ``WAIT_SPIN_S`` sleeps on its pipe for at most this long [s] before
+it looks at the step board again (a wake-up message ends the nap at once; the rare one
+missed costs at most this)."""
+
+_WAKE = ("wake", None)
+"""The message that wakes a worker sleeping on its pipe (a step is on the board)."""
 
 BOARD_INFO_SLOTS = 32
 """Numbers per env's info the shared step board holds (floats and ints each): an info
@@ -138,7 +143,8 @@ class TfaldaTrackVectorEnv(VectorEnv):
         self._seq = 0  # the last step posted on it
         self._known: list[tuple | None] = [None] * self.num_envs  # info layouts (_layout)
         self._piped = 0  # posted steps whose results a worker sent through its pipe
-        self._stale = False  # a step's answers were given up on (read them before the board)
+        self._pending: set[int] = set()  # workers whose answer to step _seq is not read
+        self._layouts = [0] * (self.num_envs + 1)  # per worker, layouts learnt from it
         self.closed = False
         self._local: list[gym.Env] = [probe] + [
             gym.make(ENV_ID, **self._kwargs) for _ in range(1, int(self._slices[1]))]
@@ -195,21 +201,27 @@ class TfaldaTrackVectorEnv(VectorEnv):
 
     def _drain(self, n: int) -> None:
         """Read and drop the answers of the first ``n`` workers (after an error here)."""
-        for conn in self._conns[:n]:
+        for w in range(1, n + 1):
             with contextlib.suppress(EOFError, ConnectionError, OSError):
-                _receive(conn, WAIT_SPIN_S)
+                self._answer(w)
+
+    def _answer(self, lane: int) -> tuple[bool, Any]:
+        """Worker ``lane``'s answer ``(ok, data)`` to a pipe command. Answers to posted
+        steps this process gave up on (a Ctrl-C while it waited) may come first: skipped,
+        their info layouts learnt (the worker learnt them as it sent them)."""
+        message = _receive(self._conns[lane - 1], WAIT_SPIN_S)
+        while len(message) == 3:
+            self._learn(lane, message)
+            message = _receive(self._conns[lane - 1], WAIT_SPIN_S)
+        return message
 
     def _gather(self, command: str) -> list[Any]:
         """Every worker's answer; a worker's error raised here (after all have answered, so
         the pipes stay in step)."""
         answers, error = [], None
-        for w, conn in enumerate(self._conns):
+        for w in range(len(self._conns)):
             try:
-                message = _receive(conn, WAIT_SPIN_S)
-                while len(message) == 3:  # a posted step's answer, read late (a Ctrl-C)
-                    self._learn(w + 1, message)
-                    message = _receive(conn, WAIT_SPIN_S)
-                ok, data = message
+                ok, data = self._answer(w + 1)
             except (EOFError, ConnectionError):
                 ok, data = False, ("RuntimeError", f"worker {w + 1} of the vector env died "
                                    f"(exit code {self._procs[w].exitcode})", "")
@@ -238,16 +250,26 @@ class TfaldaTrackVectorEnv(VectorEnv):
         board cannot hold, from the pipe)."""
         board = self._board
         assert board is not None
+        n0 = int(self._slices[1])
+        if self._pending:  # a step given up on (a Ctrl-C while waiting): its answers
+            with contextlib.suppress(Exception):  # first, or a worker could miss it
+                self._collect()
+        self._pending = set(range(1, len(self._conns) + 1))
         board.actions[:] = acts
         board.autoreset[:] = self._autoreset
         board.ctrl[1] = same_step
         self._seq += 1
         board.ctrl[0] = self._seq  # last: it posts the step
-        n0 = int(self._slices[1])
+        for w, conn in enumerate(self._conns, start=1):
+            if board.ctrl[board.asleep + w]:  # past its spin: blocked on its pipe
+                with contextlib.suppress(OSError):
+                    conn.send(_WAKE)
         try:
             answers = _step_envs(self._local, self.single_observation_space,
                                  self._observations, 0, acts[:n0], self._autoreset[:n0],
                                  same_step)
+            if _others_reset(self._autoreset, 0, n0):
+                _prepare_resets(self._local)
         except BaseException:
             with contextlib.suppress(Exception):
                 self._collect()  # the workers' answers, dropped: the board stays in step
@@ -257,13 +279,14 @@ class TfaldaTrackVectorEnv(VectorEnv):
         return answers
 
     def _collect(self) -> list[list[tuple[float, bool, bool, dict[str, Any]]]]:
-        """Every worker's results of the step last posted (a worker's error raised after
-        all have answered)."""
+        """The results of the step last posted of every worker not heard yet (all of
+        them, but after a Ctrl-C), in worker order; a worker's error raised after all
+        have answered."""
         board = self._board
         assert board is not None
         parts, error = [], None
-        stale, self._stale = self._stale, True  # until every answer is in (a Ctrl-C…)
-        for w, conn in enumerate(self._conns, start=1):
+        for w in sorted(self._pending):
+            conn = self._conns[w - 1]
             start, stop = int(self._slices[w]), int(self._slices[w + 1])
             try:
                 message = _await_answer(conn, board, w, self._seq)
@@ -276,10 +299,15 @@ class TfaldaTrackVectorEnv(VectorEnv):
             except (EOFError, ConnectionError):
                 message = (False, ("RuntimeError", f"worker {w} of the vector env died (exit "
                                    f"code {self._procs[w - 1].exitcode})", ""), self._seq)
+            self._pending.discard(w)
             if message is None:
-                if stale:  # a pipe answer to a step given up on is in the pipe by now
-                    while conn.poll(0):
-                        self._learn(w, conn.recv())
+                if board.ctrl[board.layouts + w] != self._layouts[w]:
+                    # A layout sent through the pipe was lost (a Ctrl-C inside its
+                    # reading): the board's numbers cannot be decoded.
+                    self.close()
+                    raise RuntimeError(
+                        f"the vector env lost worker {w}'s info layout (a Ctrl-C while it "
+                        "read one); make a new one with gymnasium.make_vec")
                 parts.append(_read_results(board, start, stop, self._known))
                 continue
             ok, data, _ = message
@@ -289,17 +317,20 @@ class TfaldaTrackVectorEnv(VectorEnv):
                 parts.append(data)
             elif error is None:
                 error = data
-        self._stale = False
         if error is not None:
             self._raise("step", error)
         return parts
 
     def _learn(self, lane: int, message: tuple) -> None:
         """The info layouts of worker ``lane``'s envs from its pipe answer to a posted
-        step (the worker learnt them as it sent it); other messages teach nothing."""
+        step (the worker learnt them as it sent it, and counts them: ``_layouts``);
+        other messages teach nothing."""
+        if len(message) == 3 and message[2] == self._seq:
+            self._pending.discard(lane)  # the answer to the step last posted: heard
         if len(message) == 3 and message[0]:
             start, stop = int(self._slices[lane]), int(self._slices[lane + 1])
             self._known[start:stop] = [_layout(answer[3]) for answer in message[1]]
+            self._layouts[lane] += 1
 
     def _indices(self, indices: Sequence[int]) -> list[int]:
         """``indices`` as a list of env numbers, each checked to be one of ours."""
@@ -648,7 +679,9 @@ class _Board:
     their results back: a pipe message costs ≈ 15 µs of system calls and wake-up on this
     VM, and a step through the pipes took four (≈ 0.12 ms of a 1.4 ms step of two envs).
     ``ctrl``: the number of the step posted, its SAME_STEP flag, then per worker the
-    number of the last step whose results it wrote. Per env: its action, its autoreset
+    number of the last step whose results it wrote, whether it sleeps on its pipe (past
+    its spin: the parent wakes it with a message) and how many info layouts it sent
+    through the pipe (the parent checks it learnt as many). Per env: its action, its autoreset
     flag, reward, terminated and truncated, and its info's floats and ints (in the order
     of its keys; the keys, types and strings are its layout, ``_layout``, which both sides
     learn from the infos that went through the pipe)."""
@@ -656,7 +689,9 @@ class _Board:
     def __init__(self, ctx: Any, num_envs: int, action_shape: tuple[int, ...],
                  lanes: int) -> None:
         size = int(np.prod(action_shape, dtype=np.int64))
-        self._raw = (ctx.RawArray(ctypes.c_int64, 2 + lanes),
+        self.asleep = lanes  # ctrl[asleep + w]: worker w blocks on its pipe (wake it)
+        self.layouts = 2 * lanes  # ctrl[layouts + w]: layouts worker w sent by pipe
+        self._raw = (ctx.RawArray(ctypes.c_int64, 3 * lanes),
                      ctx.RawArray(ctypes.c_double, num_envs * size),
                      ctx.RawArray(ctypes.c_uint8, num_envs),
                      ctx.RawArray(ctypes.c_double, num_envs),
@@ -678,7 +713,8 @@ class _Board:
         self.ints = np.frombuffer(ints, np.int64).reshape(n, BOARD_INFO_SLOTS)
 
     def __getstate__(self) -> dict[str, Any]:  # to a spawned worker: the shared memory
-        return {"_raw": self._raw, "_shape": self._shape}
+        return {"_raw": self._raw, "_shape": self._shape, "asleep": self.asleep,
+                "layouts": self.layouts}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
@@ -737,6 +773,23 @@ def _read_results(board: _Board, start: int, stop: int, known: list[tuple | None
     return out
 
 
+def _others_reset(autoreset: np.ndarray, start: int, stop: int) -> bool:
+    """Whether envs outside ``start:stop`` reset in this step and none inside does: the
+    lane stepping ``start:stop`` will wait ≈ a reset's extra time (≈ 3 ms) for them."""
+    return bool(not autoreset[start:stop].any()
+                and (autoreset[:start].any() or autoreset[stop:].any()))
+
+
+def _prepare_resets(envs: list[gym.Env]) -> None:
+    """``prepare_reset`` on each env (a lane with time to spare: while another lane
+    resets, it generates its envs' next tracks, ≈ 1 ms of each of their resets, so that
+    the others wait less on them); never fails the lane (a reset that would fail still
+    fails, then, as it would have)."""
+    for env in envs:
+        with contextlib.suppress(Exception):
+            env.unwrapped.prepare_reset()  # type: ignore[attr-defined]
+
+
 def _await_answer(conn: Connection, board: _Board, lane: int, seq: int) -> Any:
     """Wait for worker ``lane``'s results of step ``seq``: None when they are on the
     board, else the next message on its pipe (its answer ``(ok, data, seq)``: an error,
@@ -751,24 +804,34 @@ def _await_answer(conn: Connection, board: _Board, lane: int, seq: int) -> Any:
         os.sched_yield()
 
 
-def _await_command(conn: Connection, board: _Board | None, seen: int, spin_s: float
-                   ) -> Any:
-    """A worker's next command: ``("post", n)`` when step ``n`` is on the board, else
-    the pipe's next message; polled for up to ``spin_s``, then waited for in
-    ``BOARD_POLL_S`` naps (the board cannot wake a sleeper)."""
+def _await_command(conn: Connection, board: _Board | None, seen: int, spin_s: float,
+                   lane: int = 1) -> Any:
+    """Worker ``lane``'s next command: ``("post", n)`` when step ``n`` is on the board,
+    else the pipe's next message; polled for up to ``spin_s``, then slept for on the
+    pipe: the worker says so on the board and the parent, posting a step, sends a
+    wake-up. (x86 may order the parent's read of that flag before its write of the step
+    number: a missed wake-up costs one nap, ``BOARD_NAP_S``.)"""
     if board is None:
         return _receive(conn, spin_s)
     ctrl = board.ctrl
     deadline = time.perf_counter() + spin_s
-    while True:
-        if ctrl[0] != seen:
-            return "post", int(ctrl[0])
-        if conn.poll(0):
-            return conn.recv()
-        if time.perf_counter() < deadline:
-            os.sched_yield()
-        else:
-            conn.poll(BOARD_POLL_S)
+    asleep = board.asleep + lane
+    try:
+        while True:
+            if ctrl[0] != seen:
+                return "post", int(ctrl[0])
+            if conn.poll(0):
+                message = conn.recv()
+                if message[0] != "wake":
+                    return message
+            elif ctrl[asleep]:
+                conn.poll(BOARD_NAP_S)  # until a message (a wake-up) or the nap's end
+            elif time.perf_counter() < deadline:
+                os.sched_yield()
+            else:
+                ctrl[asleep] = 1  # then the board is looked at once more before a nap
+    finally:
+        ctrl[asleep] = 0
 
 
 def _receive(conn: Connection, spin_s: float) -> Any:
@@ -802,7 +865,7 @@ def _worker(conn: Connection, shm: Any, space: gym.Space,
         seen = 0  # the last step taken from the board
         known: list[tuple | None] = [None] * (stop - start)  # as the parent's _known
         while True:
-            command, data = _await_command(conn, board, seen, WAIT_SPIN_S)
+            command, data = _await_command(conn, board, seen, WAIT_SPIN_S, lane)
             if command == "post":
                 assert board is not None
                 seen = data
@@ -811,15 +874,19 @@ def _worker(conn: Connection, shm: Any, space: gym.Space,
                                         board.actions[start:stop].copy(),
                                         board.autoreset[start:stop].astype(np.bool_),
                                         bool(board.ctrl[1]))
-                except Exception as exc:
+                    if _post_results(board, start, answer, known):
+                        board.ctrl[1 + lane] = seen  # last: it hands the results over
+                    else:
+                        layouts = [_layout(a[3]) for a in answer]
+                        conn.send((True, answer, seen))
+                        known = layouts
+                        board.ctrl[board.layouts + lane] += 1
+                except Exception as exc:  # reported to the parent, raised there
                     conn.send((False, (type(exc).__name__, str(exc), traceback.format_exc()),
                                seen))
                     continue
-                if _post_results(board, start, answer, known):
-                    board.ctrl[1 + lane] = seen  # last: it hands the results over
-                else:
-                    known = [_layout(a[3]) for a in answer]
-                    conn.send((True, answer, seen))
+                if _others_reset(board.autoreset, start, stop):
+                    _prepare_resets(envs)
                 continue
             try:
                 if command == "step":

@@ -323,3 +323,31 @@ def test_a_reset_refused_for_its_track_leaves_the_env_as_it_was() -> None:
     with pytest.raises(ValueError, match="too large"):
         env.reset(options={"track": Track((Straight(100.0),), closed=False)})
     assert same(rollout(env, seed=0, steps=20), rollout(TfaldaTrackEnv(), seed=0, steps=20))
+
+
+def test_prepare_reset_generates_the_next_track_and_changes_nothing() -> None:
+    """``prepare_reset`` (a vector env's idle lane) generates the track the next reset
+    draws, which then takes it; episodes equal an env's that never prepared, and a seeded
+    reset (another draw) generates its own track."""
+    plain, eager = gym.make("TfaldaTrack-v0"), gym.make("TfaldaTrack-v0")
+    env = eager.unwrapped
+    assert not env.prepare_reset()  # no np_random yet: nothing to draw from
+    for e in (plain, eager):
+        e.reset(seed=3)
+    for episode in range(3):
+        assert env.prepare_reset()
+        assert not env.prepare_reset()  # prepared already
+        spec, track = env._prepared
+        if episode == 2:
+            want, got = plain.reset(seed=9), eager.reset(seed=9)  # not the prepared draw
+            assert env._track is not track
+        else:
+            want, got = plain.reset(), eager.reset()
+            assert env._track is track and env._track_label == spec
+        assert np.array_equal(want[0], got[0]) and want[1] == got[1]
+        for _ in range(5):
+            a = np.array([0.1], np.float32)
+            assert all(np.array_equal(x, y) for x, y in zip(plain.step(a), eager.step(a)))
+    fixed = gym.make("TfaldaTrack-v0", track="oval").unwrapped
+    fixed.reset(seed=0)
+    assert not fixed.prepare_reset()  # a fixed track: nothing to generate

@@ -4,6 +4,9 @@ Gymnasium's SyncVectorEnv bit for bit, and fails cleanly."""
 from __future__ import annotations
 
 import math
+import os
+import signal
+import threading
 import time
 from typing import Any
 
@@ -355,9 +358,65 @@ def test_a_ctrl_c_while_waiting_for_a_worker_keeps_the_board_in_step(
 
         env0.step = slow
         assert_same(venv.step(second), sync.step(second))
-        assert venv._piped == 0  # the first answer came late, the second by the board
+        assert venv._piped == 1  # the first step's answer, read before the second's post
         for _ in range(3):
             assert_same(venv.step(first), sync.step(first))
+    finally:
+        venv.close()
+        sync.close()
+
+
+def _abandon_next_wait(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The next wait for a worker's posted step raises KeyboardInterrupt (a Ctrl-C)."""
+    from tfalda_sim.envs import vector
+    real = vector._await_answer
+
+    def interrupted(*args: Any) -> Any:
+        monkeypatch.setattr(vector, "_await_answer", real)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(vector, "_await_answer", interrupted)
+
+
+def test_after_a_step_given_up_on_commands_and_steps_stay_in_step(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """Ctrl-C while waiting for a posted step (its answer through the pipe: the first
+    one), then a reset that fails in this process (the worker's answer is drained) and
+    a good reset: every answer is the right one's; and a step given up on before the
+    worker took it (the worker stopped, as a loaded machine may) is not skipped."""
+    venv = TfaldaTrackVectorEnv(2, workers=2, track="oval")
+    sync = gym.make_vec("TfaldaTrack-v0", num_envs=2, vectorization_mode="sync", track="oval")
+    try:
+        if venv._board is None:
+            pytest.skip("no step board on this machine (pipes only)")
+        venv.reset(seed=2)
+        sync.reset(seed=2)
+        action = np.full((2, 1), 0.3, np.float32)
+        _abandon_next_wait(monkeypatch)
+        with pytest.raises(KeyboardInterrupt):
+            venv.step(action)
+        with pytest.raises(ValueError, match="unknown reset option"):
+            venv.reset(options={"bogus": 1})
+        assert_same(venv.reset(seed=0), sync.reset(seed=0))
+        for _ in range(3):
+            assert_same(venv.step(action), sync.step(action))
+        worker = venv._procs[0]
+        os.kill(worker.pid, signal.SIGSTOP)  # it cannot take the next steps yet
+        wake = threading.Timer(0.3, os.kill, (worker.pid, signal.SIGCONT))
+        try:
+            _abandon_next_wait(monkeypatch)
+            with pytest.raises(KeyboardInterrupt):
+                venv.step(-action)
+            sync.step(-action)
+            wake.start()  # it wakes while the next step is posted (or waits to be)
+            for _ in range(3):
+                assert_same(venv.step(action), sync.step(action))
+        finally:
+            wake.cancel()
+            os.kill(worker.pid, signal.SIGCONT)
+        time.sleep(0.3)  # past the workers' spin: asleep on their pipes, woken by a step
+        assert venv._board.ctrl[venv._board.asleep + 1] == 1
+        assert_same(venv.step(action), sync.step(action))
     finally:
         venv.close()
         sync.close()
