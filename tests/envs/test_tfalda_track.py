@@ -347,7 +347,8 @@ def test_prepare_reset_generates_the_next_track_and_changes_nothing() -> None:
         assert np.array_equal(want[0], got[0]) and want[1] == got[1]
         for _ in range(5):
             a = np.array([0.1], np.float32)
-            assert all(np.array_equal(x, y) for x, y in zip(plain.step(a), eager.step(a)))
+            pairs = zip(plain.step(a), eager.step(a), strict=True)
+            assert all(np.array_equal(x, y) for x, y in pairs)
     fixed = gym.make("TfaldaTrack-v0", track="oval").unwrapped
     fixed.reset(seed=0)
     assert not fixed.prepare_reset()  # a fixed track: nothing to generate
