@@ -468,44 +468,37 @@ def _raster_kernel(
                                 continue
                             for q in range(first, q_end + 1):
                                 px = ox + (q + 0.5) * res
+                                vx = vy = hv = dx = dy = 0.0
                                 if arc:
                                     vx = px - cx
                                     vy = py - cy
                                     hv = math.hypot(vx, vy)
                                     d = sign * (radius - hv)
-                                    if abs(d) > pad or not (has_special
-                                                            or _near_line(d, lane_w, line_reach)):
-                                        continue
-                                    side = plain and abs(abs(d) - lane_w) <= line_reach
-                                    centre = plain and abs(d) <= line_reach
-                                    if centre:
-                                        across = _band(d, -0.5 * line_w, 0.5 * line_w, res)
-                                        if across == 0.0:
-                                            continue  # nothing to paint: no atan2
-                                    # Well inside the chunk's sector (by far more than rounding
-                                    # moves an angle), its arc length is inside [ua, ub): no
-                                    # atan2 for a pixel whose value does not depend on it.
-                                    if not (side and wedge
-                                            and sign * (ax_ * vy - ay_ * vx) > INSIDE_MARGIN * hv
-                                            and sign * (vx * by_ - vy * bx_) > INSIDE_MARGIN * hv):
-                                        u = ((sign * (math.atan2(vy, vx) - phi0))
-                                             % (2.0 * math.pi)) * radius
-                                        if u < ua or u > ub or (u == ub and not last):
-                                            continue
                                 else:
                                     dx = px - x0[j]
                                     dy = py - y0[j]
                                     d = -dx * sh + dy * ch
-                                    if abs(d) > pad or not (has_special
-                                                            or _near_line(d, lane_w, line_reach)):
-                                        continue
-                                    side = plain and abs(abs(d) - lane_w) <= line_reach
-                                    centre = plain and abs(d) <= line_reach
-                                    if centre:
-                                        across = _band(d, -0.5 * line_w, 0.5 * line_w, res)
-                                        if across == 0.0:
-                                            continue
+                                if abs(d) > pad or not (has_special
+                                                        or _near_line(d, lane_w, line_reach)):
+                                    continue
+                                side = plain and abs(abs(d) - lane_w) <= line_reach
+                                centre = plain and abs(d) <= line_reach
+                                if centre:
+                                    across = _band(d, -0.5 * line_w, 0.5 * line_w, res)
+                                    if across == 0.0:
+                                        continue  # nothing to paint: no arc length
+                                if not arc:
                                     u = dx * ch + dy * sh
+                                    if u < ua or u > ub or (u == ub and not last):
+                                        continue
+                                # Well inside the chunk's sector (by far more than rounding
+                                # moves an angle), its arc length is inside [ua, ub): no
+                                # atan2 for a pixel whose value does not depend on it.
+                                elif not (side and wedge
+                                          and sign * (ax_ * vy - ay_ * vx) > INSIDE_MARGIN * hv
+                                          and sign * (vx * by_ - vy * bx_) > INSIDE_MARGIN * hv):
+                                    u = ((sign * (math.atan2(vy, vx) - phi0))
+                                         % (2.0 * math.pi)) * radius
                                     if u < ua or u > ub or (u == ub and not last):
                                         continue
                                 if side:  # ``_paint_pixel``'s value, its expressions as they are

@@ -322,29 +322,41 @@ def test_the_board_carries_infos_exactly_or_refuses_them() -> None:
     assert _layout({f"k{i}": 1.0 for i in range(BOARD_INFO_SLOTS)}) is not None
 
 
+def _abandon_next_wait(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The next wait for a worker's posted step raises KeyboardInterrupt (a Ctrl-C)."""
+    from tfalda_sim.envs import vector
+    real = vector._await_answer
+
+    def interrupted(*args: Any) -> Any:
+        monkeypatch.setattr(vector, "_await_answer", real)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(vector, "_await_answer", interrupted)
+
+
+def _board_and_sync() -> tuple[TfaldaTrackVectorEnv, gym.vector.VectorEnv]:
+    """Two envs on the oval: ours with a worker (skipped where there is no board) and
+    SyncVectorEnv's, both reset with seed 2."""
+    venv = TfaldaTrackVectorEnv(2, workers=2, track="oval")
+    if venv._board is None:
+        venv.close()
+        pytest.skip("no step board on this machine (pipes only)")
+    sync = gym.make_vec("TfaldaTrack-v0", num_envs=2, vectorization_mode="sync", track="oval")
+    venv.reset(seed=2)
+    sync.reset(seed=2)
+    return venv, sync
+
+
 def test_a_ctrl_c_while_waiting_for_a_worker_keeps_the_board_in_step(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """A KeyboardInterrupt while this process waits for a worker's posted step: the
     worker's answer (here through the pipe, its first: it teaches the info layouts) is
     read before the next step's results are taken from the board, which equal
     SyncVectorEnv's."""
-    from tfalda_sim.envs import vector
-
-    venv = TfaldaTrackVectorEnv(2, workers=2, track="oval")
-    sync = gym.make_vec("TfaldaTrack-v0", num_envs=2, vectorization_mode="sync", track="oval")
+    venv, sync = _board_and_sync()
     try:
-        if venv._board is None:
-            pytest.skip("no step board on this machine (pipes only)")
-        venv.reset(seed=2)
-        sync.reset(seed=2)
         first, second = np.full((2, 1), 0.3, np.float32), np.full((2, 1), -0.2, np.float32)
-        real = vector._await_answer
-
-        def interrupted(*args: Any) -> Any:
-            monkeypatch.setattr(vector, "_await_answer", real)
-            raise KeyboardInterrupt
-
-        monkeypatch.setattr(vector, "_await_answer", interrupted)
+        _abandon_next_wait(monkeypatch)
         with pytest.raises(KeyboardInterrupt):
             venv.step(first)
         sync.step(first)
@@ -366,17 +378,6 @@ def test_a_ctrl_c_while_waiting_for_a_worker_keeps_the_board_in_step(
         sync.close()
 
 
-def _abandon_next_wait(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The next wait for a worker's posted step raises KeyboardInterrupt (a Ctrl-C)."""
-    from tfalda_sim.envs import vector
-    real = vector._await_answer
-
-    def interrupted(*args: Any) -> Any:
-        monkeypatch.setattr(vector, "_await_answer", real)
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(vector, "_await_answer", interrupted)
-
 
 def test_after_a_step_given_up_on_commands_and_steps_stay_in_step(
         monkeypatch: pytest.MonkeyPatch) -> None:
@@ -384,13 +385,8 @@ def test_after_a_step_given_up_on_commands_and_steps_stay_in_step(
     one), then a reset that fails in this process (the worker's answer is drained) and
     a good reset: every answer is the right one's; and a step given up on before the
     worker took it (the worker stopped, as a loaded machine may) is not skipped."""
-    venv = TfaldaTrackVectorEnv(2, workers=2, track="oval")
-    sync = gym.make_vec("TfaldaTrack-v0", num_envs=2, vectorization_mode="sync", track="oval")
+    venv, sync = _board_and_sync()
     try:
-        if venv._board is None:
-            pytest.skip("no step board on this machine (pipes only)")
-        venv.reset(seed=2)
-        sync.reset(seed=2)
         action = np.full((2, 1), 0.3, np.float32)
         _abandon_next_wait(monkeypatch)
         with pytest.raises(KeyboardInterrupt):
