@@ -163,9 +163,13 @@ def stream(fn: Callable[[J], R], jobs: Iterable[J], *, workers: int = 1) -> Iter
             yield fn(job)
         return
     # fork on Linux, also where it is not the default (3.14+: forkserver): the workers must
-    # be our children for PR_SET_PDEATHSIG to tie them to this process.
-    context = (multiprocessing.get_context("fork") if sys.platform.startswith("linux")
-               else None)
+    # be our children for PR_SET_PDEATHSIG to tie them to this process. But spawn (fork +
+    # exec: our children too) in a process that has imported Ray: its threads keep running
+    # after ray.shutdown(), and a fork copies whatever lock one of them holds (a test-suite
+    # run hung so, both workers waiting on one semaphore).
+    ray_here = "ray" in sys.modules
+    context = (multiprocessing.get_context("spawn" if ray_here else "fork")
+               if sys.platform.startswith("linux") else None)
     pool = ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
                                initargs=(os.getpid(),), mp_context=context)
     def collect(future: Future[R]) -> R:

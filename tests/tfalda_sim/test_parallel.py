@@ -34,6 +34,19 @@ def fail_on_three(x: int) -> int:
     return x
 
 
+def ray_imported(_: int) -> bool:
+    return "ray" in sys.modules
+
+
+def test_a_process_that_imported_ray_spawns_its_workers() -> None:
+    """Ray's threads outlive ray.shutdown(); a fork copies a lock one of them holds (a
+    test-suite run hung so): after `import ray` the workers are spawned (they start
+    without it), results as before."""
+    pytest.importorskip("ray")
+    assert list(stream(ray_imported, range(3), workers=2)) == [False] * 3
+    assert list(stream(square, range(5), workers=2)) == [x * x for x in range(5)]
+
+
 def _children(pid: int) -> set[int]:
     kids: set[int] = set()
     for task in Path(f"/proc/{pid}/task").iterdir():
