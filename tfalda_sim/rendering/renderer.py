@@ -19,7 +19,6 @@ frame bit for bit — perception renders only its ROIs.
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 
@@ -60,47 +59,60 @@ def _texel_transform(affine: np.ndarray, size_x: float, size_y: float) -> tuple:
 
 @njit(cache=True, error_model="numpy")
 def _atlas_maps(map_x: np.ndarray, map_y: np.ndarray, rows: np.ndarray, cols: np.ndarray,
-                widths: np.ndarray, offsets: np.ndarray, coord_a: np.ndarray,
-                coord_b: np.ndarray, scale: np.ndarray, bias_x: np.ndarray,
-                bias_y: np.ndarray, flags: np.ndarray, affine: np.ndarray, size_x: float,
-                size_y: float, wall_shift: float, wall_cols: float) -> None:
+                widths: np.ndarray, offsets: np.ndarray, codes: np.ndarray,
+                coord_a: np.ndarray, coord_b: np.ndarray, wall_row: np.ndarray,
+                piece_table: np.ndarray, levels: int, wall_y: float, affine: np.ndarray,
+                size_x: float, size_y: float, wall_shift: float, wall_cols: float) -> None:
     """Atlas coordinates (pixel centres at integers) of the requested row pieces, packed
     back to back: piece t is image row ``rows[t]``, columns ``cols[t]`` … + ``widths[t]``,
     written to the flat ``map_x`` and ``map_y`` from pixel ``offsets[t]`` on (planar maps:
     contiguous stores here, and OpenCV's remap reads them faster than interleaved ones).
 
-    Ground pixels (flag 1): ``(coord_a, coord_b)`` is the ground hit in the car frame [m],
-    moved to level-0 texels by ``affine`` and into the pixel's mip level by ``scale`` and
-    ``bias``. Other pixels: ``coord_a`` is the wall column at yaw 0, ``coord_b`` the atlas
-    row; the column turns with the car and wraps around the cylinder. Both are computed
-    and one is selected, so the loop has no branch and vectorises."""
+    Every pixel of a piece has the same code ``codes[t]`` (the pieces are cut where it
+    changes): a mip level on the ground, ``levels`` on the walls, ``levels + 1`` for the
+    ceiling; ``piece_table[code]`` holds its scale (``2^-level``, 0 off the ground) and its
+    atlas offsets (x, y). So a pixel reads only its two coordinates: the loop is bound by
+    memory, and per-pixel scale and offset tables doubled its traffic.
+
+    Ground: ``(coord_a, coord_b)`` is the ground hit in the car frame [m], moved to level-0
+    texels by ``affine`` and into the level by the scale and offsets. Walls: ``coord_a`` is
+    the wall column at yaw 0, which turns with the car and wraps around the cylinder; the
+    atlas row is ``wall_row`` [texels] + ``wall_y`` (summed in float64, rounded once).
+    Ceiling (never sampled alone): the wall column and the padding row ``coord_b``."""
     a00, a01, a02, a10, a11, a12, lo, hx, hy = _texel_transform(affine, size_x, size_y)
     shift = np.float32(wall_shift)
     wrap = np.float32(wall_cols)
-    one = np.float32(1.0)
     end = 0
     for t in range(len(rows)):
         r = rows[t]
         c0 = cols[t]
         width = widths[t]
+        code = codes[t]
+        scale = piece_table[code, 0]
+        bx = piece_table[code, 1]
+        by = piece_table[code, 2]
         ar = coord_a[r, c0:c0 + width]
-        br = coord_b[r, c0:c0 + width]
-        sr = scale[r, c0:c0 + width]
-        bxr = bias_x[r, c0:c0 + width]
-        byr = bias_y[r, c0:c0 + width]
-        fr = flags[r, c0:c0 + width]
         start = offsets[t]
         mx = map_x[start:start + width]  # slices of flat views: no per-row reshape
         my = map_y[start:start + width]
-        for j in range(width):
-            g = np.float32(fr[j] & 1)  # 0/1 factors blend exactly and keep this branch-free
-            # Level-0 texel coordinates, clamped into the level's zero guard band.
-            x = min(max(a00 * ar[j] + a01 * br[j] + a02, lo), hx)
-            y = min(max(a10 * ar[j] + a11 * br[j] + a12, lo), hy)
-            w = ar[j] + shift  # both in [0, wrap): one subtraction wraps it
-            w = w - wrap * np.float32(w >= wrap)
-            mx[j] = g * (x * sr[j]) + (one - g) * w + bxr[j]
-            my[j] = g * (y * sr[j] + byr[j]) + (one - g) * br[j]
+        if code < levels:
+            br = coord_b[r, c0:c0 + width]
+            for j in range(width):
+                # Level-0 texel coordinates, clamped into the level's zero guard band.
+                x = min(max(a00 * ar[j] + a01 * br[j] + a02, lo), hx)
+                y = min(max(a10 * ar[j] + a11 * br[j] + a12, lo), hy)
+                mx[j] = x * scale + bx
+                my[j] = y * scale + by
+        else:
+            for j in range(width):
+                w = ar[j] + shift  # both in [0, wrap): one subtraction wraps it
+                mx[j] = w - wrap * np.float32(w >= wrap) + bx
+            if code == levels:
+                for j in range(width):
+                    my[j] = np.float32(wall_row[r, c0 + j] + wall_y)
+            else:
+                for j in range(width):
+                    my[j] = coord_b[r, c0 + j]
         end = max(end, start + width)
     _pad_tail(map_x, map_y, end)
 
@@ -252,16 +264,17 @@ def _paint_obstacles(out: np.ndarray, out_offsets: np.ndarray, rows: np.ndarray,
 
 
 @njit(cache=True)
-def _pack_pieces(boxes: np.ndarray, reads: np.ndarray, cuts: np.ndarray, pack: int
-                 ) -> tuple[np.ndarray, np.ndarray, int]:
+def _pack_pieces(boxes: np.ndarray, reads: np.ndarray, code: np.ndarray, cuts: np.ndarray,
+                 pack: int) -> tuple[np.ndarray, np.ndarray, int]:
     """Cut every row of the windows ``boxes`` ``(k, 4)`` (x, y, w, h) [px] into runs of
     pixels that read the atlas (``reads``) and runs of nothing but ceiling, which are not
-    sampled; ``cuts[r]`` lists the columns where row r switches between them, padded with
-    the image width. Returns ``(5, n)``: row, first column, width, offset in the output
-    and offset in the sampled buffer of each piece (ceiling runs: the zero tail after the
-    sampled pixels, rounded up to whole rows of ``pack``); ``(4, m)``: row, first column,
-    width and sampled offset of the m sampled pieces; the rows of ``pack`` sampled. One
-    call: the ROIs move every frame, so this runs every frame."""
+    sampled; ``cuts[r]`` lists the columns where row r switches between them or changes
+    its pixel ``code`` (``_atlas_maps``), padded with the image width. Returns ``(5, n)``:
+    row, first column, width, offset in the output and offset in the sampled buffer of
+    each piece (ceiling runs: the zero tail after the sampled pixels, rounded up to whole
+    rows of ``pack``); ``(5, m)``: row, first column, width, sampled offset and code of
+    the m sampled pieces; the rows of ``pack`` sampled. One call: the ROIs move every
+    frame, so this runs every frame."""
     n_cuts = cuts.shape[1]
     n = 0
     for k in range(boxes.shape[0]):
@@ -296,21 +309,19 @@ def _pack_pieces(boxes: np.ndarray, reads: np.ndarray, cuts: np.ndarray, pack: i
                 if start == x0 + w:
                     break
     tex_rows = (tex_at + pack - 1) // pack
-    s_out = np.empty((4, n_sampled), np.int64)
+    s_out = np.empty((5, n_sampled), np.int64)
     m = 0
     for t in range(n):
         if out[4, t] >= 0:
             for q in range(3):
                 s_out[q, m] = out[q, t]
             s_out[3, m] = out[4, t]
+            s_out[4, m] = code[out[0, t], out[1, t]]
             m += 1
         else:
             out[4, t] = tex_rows * pack
     return out, s_out, tex_rows
 
-
-_layout_ids = itertools.count()
-"""Owner ids of atlas layouts (``_Layout.uid``)."""
 
 FOOTPRINT_BLOCK_PX: int = 16
 """Edge of the image blocks [px] whose ground hits are boxed separately for a lazy scene:
@@ -423,99 +434,61 @@ class _Stack:
     s_cols: np.ndarray
     s_widths: np.ndarray
     s_offsets: np.ndarray
+    s_codes: np.ndarray  # pixel code of each sampled piece (``_atlas_maps``)
     tex_rows: int
     zero_len: int
     out_len: int
     window_offsets: list[int]
     level_bounds: np.ndarray  # (n, 5): level and car-frame box of the ground hits per block
     wall_rows: tuple[float, float]  # range of wall texture rows read (inf, −inf: none)
-    box_array: np.ndarray  # (k, 4) int64: the windows
 
 
 @dataclass(frozen=True)
 class _Layout:
-    """Per-pixel constants for one atlas layout and hall (cached by the renderer).
-
-    ``coord_b``, ``bias_x`` and ``bias_y`` are the pixel layout's shared buffers: they
-    hold this atlas's values only in the image blocks whose ``block_owner`` is ``uid``,
-    and ``render_windows`` fills the blocks it reads first (``_own_blocks``). A new track
-    moves the atlas's levels, and a view reads a sixth of the image: filling all of it
-    cost more than the rest of a reset's render."""
+    """Per-pixel constants for one atlas layout and hall (cached by the renderer): the
+    pixel layout's arrays, which do not depend on the atlas, and the few numbers that do
+    (``piece_table``, ``wall_y``). A new track moves the atlas's levels and costs no
+    per-pixel work."""
 
     coord_a: np.ndarray  # ground: car-frame x [m]; walls: wall column at yaw 0 [texels]
-    coord_b: np.ndarray  # ground: car-frame y [m]; walls: atlas row [texels]
-    scale: np.ndarray  # ground: 2^-level
-    bias_x: np.ndarray  # ground: level offset in the atlas; walls: the wall's atlas column
-    bias_y: np.ndarray
+    coord_b: np.ndarray  # ground: car-frame y [m]; elsewhere the padding coordinate
+    wall_row: np.ndarray  # walls: row in the wall texture [texels] (float64); else 0
+    code: np.ndarray  # uint8: level on the ground, levels on the walls, levels + 1 ceiling
     flags: np.ndarray  # uint8: 1 ground, 2 bonnet, 4 ceiling
     reads_atlas: np.ndarray  # bool per pixel: not ceiling (a constant grey)
-    cuts: np.ndarray  # per row: columns where reads_atlas switches, padded with the width
+    cuts: np.ndarray  # per row: columns where reads_atlas, code or flags change (+ width)
     block_start: np.ndarray  # ``_block_bounds`` of the pixel layout
     block_bounds: np.ndarray
     block_walls: np.ndarray
     block_cols: int  # image blocks per row
     pixel_key: tuple  # key of its ``_PixelLayout``: what window packings depend on
     pixel: _PixelLayout
-    table: np.ndarray  # (2, levels + 2) float32: atlas offsets (x, y) per pixel code
+    levels: int  # mip levels: the code of the walls
+    piece_table: np.ndarray  # (levels + 2, 3) float32 per code: scale, atlas offsets x, y
     wall_y: float  # atlas row of the wall texture's row 0
-    uid: int  # owner id of the blocks filled for this atlas
 
 
 @dataclass(frozen=True)
 class _PixelLayout:
     """The part of a ``_Layout`` that does not depend on where the atlas puts its levels
-    and walls (cached per resolution, level count, hall and wall height), and the
-    buffers its layouts fill block by block."""
+    and walls (cached per resolution, level count, hall and wall height)."""
 
     coord_a: np.ndarray
-    coord_b: np.ndarray  # ground: car-frame y [m]; elsewhere the padding coordinate
-    wall_row: np.ndarray  # walls: row in the wall texture [texels] (float64); else 0
-    code: np.ndarray  # uint8: level on the ground, levels on the walls, levels + 1 ceiling
-    scale: np.ndarray
+    coord_b: np.ndarray
+    wall_row: np.ndarray
+    code: np.ndarray
     flags: np.ndarray
     reads_atlas: np.ndarray
     cuts: np.ndarray
     block_start: np.ndarray
     block_bounds: np.ndarray
     block_walls: np.ndarray
-    atlas_coord_b: np.ndarray  # the buffers of ``_Layout.coord_b``, ``bias_x``, ``bias_y``
-    bias_x: np.ndarray
-    bias_y: np.ndarray
-    block_owner: np.ndarray  # int64 per image block: uid of the layout filled there; −1
 
 
-@njit(cache=True)
-def _own_blocks(boxes: np.ndarray, block: int, n_block_cols: int, owner: np.ndarray,
-                uid: int, code: np.ndarray, table: np.ndarray, ground_b: np.ndarray,
-                wall_row: np.ndarray, wall_code: int, wall_y: float, coord_b: np.ndarray,
-                bias_x: np.ndarray, bias_y: np.ndarray) -> None:
-    """Fill the image blocks under the windows ``boxes`` with layout ``uid``'s values
-    unless they hold them: per pixel the atlas offsets of its code (mip level, wall or
-    ceiling) from ``table``, and on the walls the atlas row, texture row + the wall's
-    atlas row summed in float64 and rounded to float32 once (as the layout always did)."""
-    h, w = code.shape
-    for k in range(boxes.shape[0]):
-        x0, y0, bw, bh = boxes[k, 0], boxes[k, 1], boxes[k, 2], boxes[k, 3]
-        for i in range(y0 // block, (y0 + bh - 1) // block + 1):
-            for j in range(x0 // block, (x0 + bw - 1) // block + 1):
-                if owner[i * n_block_cols + j] == uid:
-                    continue
-                owner[i * n_block_cols + j] = uid
-                for r in range(i * block, min((i + 1) * block, h)):
-                    for c in range(j * block, min((j + 1) * block, w)):
-                        cd = code[r, c]
-                        bias_x[r, c] = table[0, cd]
-                        bias_y[r, c] = table[1, cd]
-                        if cd == wall_code:
-                            coord_b[r, c] = np.float32(wall_row[r, c] + wall_y)
-                        else:
-                            coord_b[r, c] = ground_b[r, c]
-
-
-def _switch_columns(mask: np.ndarray) -> np.ndarray:
-    """Per row of ``mask``, the columns where it changes value, padded with the width."""
-    h, w = mask.shape
-    switch = mask[:, 1:] != mask[:, :-1]
+def _switch_columns(switch: np.ndarray) -> np.ndarray:
+    """Per row, the columns c where ``switch[:, c - 1]`` (a change between columns c − 1
+    and c) holds, padded with the width."""
+    h, w = switch.shape[0], switch.shape[1] + 1
     cuts = np.full((h, max(1, int(switch.sum(axis=1).max()))), w, np.int64)
     for r in range(h):
         found = np.flatnonzero(switch[r]) + 1
@@ -591,39 +564,34 @@ class Renderer:
         levels = scene.levels
         level = np.clip(np.rint(g.log2_fp - math.log2(scene.resolution_m)), 0,
                         levels - 1).astype(np.int64)
-        level_scale = 0.5 ** level
         wall = ~is_ground & ~ceiling
         wall_col = np.mod(g.azimuth.astype(np.float64), 2 * math.pi) * (
             hall.distance_m / WALL_TEXEL_M)
         wall_row = np.clip(z / WALL_TEXEL_M, 0.0, scene.wall_size[1] - 1.0)
         f32 = np.float32
-        code = np.where(is_ground, level, np.where(ceiling, levels + 1, levels))
+        code = np.where(is_ground, level, np.where(ceiling, levels + 1, levels)).astype(np.uint8)
         wall_row = np.where(wall, wall_row, 0.0)
         block_start, block_bounds, block_walls = _block_bounds(
             g.gx, g.gy, level, flags, wall_row, levels, FOOTPRINT_BLOCK_PX)
-        shape = flags.shape
+        # Pieces end where the code or the flags change (``reads_atlas`` with them), so
+        # every piece has one of each.
+        switches = (code[:, 1:] != code[:, :-1]) | (flags[:, 1:] != flags[:, :-1])
         return _PixelLayout(
             coord_a=np.where(is_ground, g.gx, wall_col).astype(f32),
             coord_b=np.where(is_ground, g.gy, _PAD).astype(f32),
             wall_row=wall_row,
-            code=code.astype(np.uint8),
-            scale=np.where(is_ground, level_scale, 0.0).astype(f32),
+            code=code,
             flags=flags,
             reads_atlas=flags != 4,
-            cuts=_switch_columns(flags != 4),
+            cuts=_switch_columns(switches),
             block_start=block_start,
             block_bounds=block_bounds,
             block_walls=block_walls,
-            atlas_coord_b=np.empty(shape, f32),
-            bias_x=np.empty(shape, f32),
-            bias_y=np.empty(shape, f32),
-            block_owner=np.full(len(block_start) - 1, -1, np.int64),
         )
 
     def _build_layout(self, scene: Scene) -> _Layout:
         """The scene's layout: the cached pixel layout plus where this atlas puts its
-        levels and walls (the same float64 sums as ever, rounded to float32 once), filled
-        into the pixel layout's buffers where a view needs them (``_own_blocks``)."""
+        levels and walls (the same float64 sums as ever, rounded to float32 once)."""
         base, pixel_key = self._pixel_layout(scene)
         levels = scene.levels
         origin = scene.level_origin
@@ -634,14 +602,17 @@ class Renderer:
             bias[1, lv] = 0.5 * level_scale - 0.5 + origin[lv, 1]
         bias[0, levels] = scene.wall_origin[0]
         bias[0, levels + 1] = _PAD
+        table = np.zeros((levels + 2, 3), np.float32)
+        table[:levels, 0] = 0.5 ** np.arange(levels, dtype=np.int64)
+        table[:, 1:] = bias.T  # rounded to float32 once, as the offsets always were
         return _Layout(
-            coord_a=base.coord_a, coord_b=base.atlas_coord_b, scale=base.scale,
-            bias_x=base.bias_x, bias_y=base.bias_y, flags=base.flags,
-            reads_atlas=base.reads_atlas, cuts=base.cuts, block_start=base.block_start,
-            block_bounds=base.block_bounds, block_walls=base.block_walls,
+            coord_a=base.coord_a, coord_b=base.coord_b, wall_row=base.wall_row,
+            code=base.code, flags=base.flags, reads_atlas=base.reads_atlas, cuts=base.cuts,
+            block_start=base.block_start, block_bounds=base.block_bounds,
+            block_walls=base.block_walls,
             block_cols=-(-base.flags.shape[1] // FOOTPRINT_BLOCK_PX), pixel_key=pixel_key,
-            pixel=base, table=bias.astype(np.float32), wall_y=float(scene.wall_origin[1]),
-            uid=next(_layout_ids),
+            pixel=base, levels=levels, piece_table=table,
+            wall_y=float(scene.wall_origin[1]),
         )
 
     def _buffers(self, st: _Stack, with_light: bool
@@ -723,11 +694,6 @@ class Renderer:
         layout, box_faces, _ = self._scene_data(scene)
         gain, sheen, params = self._maps_for(fx)
         st = self._stack(boxes, layout)
-        px = layout.pixel
-        _own_blocks(st.box_array, FOOTPRINT_BLOCK_PX, layout.block_cols, px.block_owner,
-                    layout.uid, px.code, layout.table, px.coord_b, px.wall_row,
-                    len(layout.table[0]) - 2, layout.wall_y, layout.coord_b, layout.bias_x,
-                    layout.bias_y)
         blur_m = speed_m_s * fx.motion_blur_s
         shifts = np.linspace(0.0, blur_m, MOTION_BLUR_SAMPLES) if blur_m > 0 else (0.0,)
         blur = len(shifts) > 1
@@ -749,14 +715,15 @@ class Renderer:
         for k, affine in enumerate(affines):
             if not st.tex_rows:
                 break
-            maps_args = (st.s_rows, st.s_cols, st.s_widths, st.s_offsets, layout.coord_a,
-                         layout.coord_b)
-            _atlas_maps(maps[0].reshape(-1), maps[1].reshape(-1), *maps_args, layout.scale,
-                        layout.bias_x, layout.bias_y, layout.flags, affine, size_x, size_y,
-                        wall_shift, float(scene.wall_size[0]))
+            maps_args = (st.s_rows, st.s_cols, st.s_widths, st.s_offsets)
+            _atlas_maps(maps[0].reshape(-1), maps[1].reshape(-1), *maps_args, st.s_codes,
+                        layout.coord_a, layout.coord_b, layout.wall_row, layout.piece_table,
+                        layout.levels, layout.wall_y, affine, size_x, size_y, wall_shift,
+                        float(scene.wall_size[0]))
             if with_light and k == 0:
                 _light_maps(light_maps[0].reshape(-1), light_maps[1].reshape(-1), *maps_args,
-                            affine, size_x, size_y, scene.resolution_m / LIGHT_RES_M)
+                            layout.coord_a, layout.coord_b, affine, size_x, size_y,
+                            scene.resolution_m / LIGHT_RES_M)
             cv2.remap(scene.atlas, maps[0], maps[1], cv2.INTER_LINEAR,
                       dst=tex[:n_tex].reshape(st.tex_rows, _PACK),
                       borderMode=cv2.BORDER_CONSTANT, borderValue=0)
@@ -810,8 +777,8 @@ class Renderer:
         if cached is not None:
             return cached
         box_array = np.array(boxes, np.int64)
-        pieces, (s_rows, s_cols, s_widths, s_offsets), tex_rows = _pack_pieces(
-            box_array, layout.reads_atlas, layout.cuts, _PACK)
+        pieces, (s_rows, s_cols, s_widths, s_offsets, s_codes), tex_rows = _pack_pieces(
+            box_array, layout.reads_atlas, layout.code, layout.cuts, _PACK)
         rows, cols, widths, out_offsets, tex_offsets = pieces
         level_bounds, wall_lo, wall_hi = _view_bounds(
             box_array, layout.block_start, layout.block_bounds, layout.block_walls,
@@ -821,11 +788,12 @@ class Renderer:
             window_offsets.append(window_offsets[-1] + ww * wh)
         stack = _Stack(rows=rows, cols=cols, widths=widths, out_offsets=out_offsets,
                        tex_offsets=tex_offsets, s_rows=s_rows, s_cols=s_cols,
-                       s_widths=s_widths, s_offsets=s_offsets, tex_rows=tex_rows,
+                       s_widths=s_widths, s_offsets=s_offsets, s_codes=s_codes,
+                       tex_rows=tex_rows,
                        zero_len=max(ww for _, _, ww, _ in boxes),
                        out_len=int(out_offsets[-1] + widths[-1]),
                        window_offsets=window_offsets, level_bounds=level_bounds,
-                       wall_rows=(wall_lo, wall_hi), box_array=box_array)
+                       wall_rows=(wall_lo, wall_hi))
         if len(self._stacks) >= 32:
             self._stacks.pop(next(iter(self._stacks)))
         self._stacks[key] = stack
