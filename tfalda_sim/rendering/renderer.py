@@ -19,6 +19,7 @@ frame bit for bit — perception renders only its ROIs.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -46,6 +47,9 @@ _NOISE_SCALE = 1.0 / 16.0
 
 _PAD = -8.0
 """Map coordinate for padding pixels: outside the atlas (reads 0)."""
+
+_pixel_layout_ids = itertools.count()
+"""Serial numbers of pixel layouts (``_PixelLayout.uid``): cheap keys of window packings."""
 
 
 @njit(cache=True)
@@ -264,17 +268,20 @@ def _paint_obstacles(out: np.ndarray, out_offsets: np.ndarray, rows: np.ndarray,
 
 
 @njit(cache=True)
-def _pack_pieces(boxes: np.ndarray, reads: np.ndarray, code: np.ndarray, cuts: np.ndarray,
-                 pack: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """Cut every row of the windows ``boxes`` ``(k, 4)`` (x, y, w, h) [px] into runs of
-    pixels that read the atlas (``reads``) and runs of nothing but ceiling, which are not
-    sampled; ``cuts[r]`` lists the columns where row r switches between them or changes
-    its pixel ``code`` (``_atlas_maps``), padded with the image width. Returns ``(5, n)``:
-    row, first column, width, offset in the output and offset in the sampled buffer of
-    each piece (ceiling runs: the zero tail after the sampled pixels, rounded up to whole
-    rows of ``pack``); ``(5, m)``: row, first column, width, sampled offset and code of
-    the m sampled pieces; the rows of ``pack`` sampled. One call: the ROIs move every
-    frame, so this runs every frame."""
+def _pack_pieces(boxes: np.ndarray, cuts: np.ndarray, seg_reads: np.ndarray,
+                 seg_code: np.ndarray, pack: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Cut every row of the windows ``boxes`` ``(k, 4)`` (x, y, w, h) [px] into pieces of
+    one pixel code (``_atlas_maps``) and flags: ``cuts[r]`` lists the columns where row r
+    changes them, padded with the image width, and segment i of row r (up to column
+    ``cuts[r, i]``) has code ``seg_code[r, i]`` and reads the atlas if ``seg_reads[r, i]``
+    (ceiling pixels are a constant grey, not sampled). Per-row tables, not lookups in the
+    image-sized arrays: those are cold in cache here and cost µs.
+
+    Returns ``(5, n)``: row, first column, width, offset in the output and offset in the
+    sampled buffer of each piece (ceiling runs: the zero tail after the sampled pixels,
+    rounded up to whole rows of ``pack``); ``(5, m)``: row, first column, width, sampled
+    offset and code of the m sampled pieces; the rows of ``pack`` sampled. One call: the
+    ROIs move every frame, so this runs every frame."""
     n_cuts = cuts.shape[1]
     n = 0
     for k in range(boxes.shape[0]):
@@ -284,6 +291,7 @@ def _pack_pieces(boxes: np.ndarray, reads: np.ndarray, code: np.ndarray, cuts: n
             for i in range(n_cuts):
                 n += x0 < cuts[r, i] < x0 + w
     out = np.empty((5, n), np.int64)
+    seg = np.empty(n, np.int64)
     t = 0
     out_at = 0
     tex_at = 0
@@ -298,9 +306,10 @@ def _pack_pieces(boxes: np.ndarray, reads: np.ndarray, code: np.ndarray, cuts: n
                     continue
                 end = min(c, x0 + w)
                 width = end - start
-                sampled = reads[r, start]
+                sampled = seg_reads[r, i]
                 out[0, t], out[1, t], out[2, t], out[3, t] = r, start, width, out_at
                 out[4, t] = tex_at if sampled else -1
+                seg[t] = i
                 tex_at += width if sampled else 0
                 n_sampled += sampled
                 out_at += width
@@ -316,7 +325,7 @@ def _pack_pieces(boxes: np.ndarray, reads: np.ndarray, code: np.ndarray, cuts: n
             for q in range(3):
                 s_out[q, m] = out[q, t]
             s_out[3, m] = out[4, t]
-            s_out[4, m] = code[out[0, t], out[1, t]]
+            s_out[4, m] = seg_code[out[0, t], seg[t]]
             m += 1
         else:
             out[4, t] = tex_rows * pack
@@ -413,6 +422,18 @@ def _view_bounds(boxes: np.ndarray, start: np.ndarray, bounds: np.ndarray,
     return out, wall_lo, wall_hi
 
 
+@njit(cache=True)
+def _pack_windows(boxes: np.ndarray, cuts: np.ndarray, seg_reads: np.ndarray,
+                  seg_code: np.ndarray, pack: int, start: np.ndarray, bounds: np.ndarray,
+                  walls: np.ndarray, block: int, n_block_cols: int) -> tuple:
+    """``_pack_pieces`` and ``_view_bounds`` of the windows ``boxes`` in one call (each
+    call from Python costs µs, and this runs every frame)."""
+    pieces, s_pieces, tex_rows = _pack_pieces(boxes, cuts, seg_reads, seg_code, pack)
+    level_bounds, wall_lo, wall_hi = _view_bounds(boxes, start, bounds, walls, block,
+                                                  n_block_cols)
+    return pieces, s_pieces, tex_rows, level_bounds, wall_lo, wall_hi
+
+
 _PACK = 1024
 """Pixels per row of the packed buffers handed to ``cv2.remap``."""
 
@@ -457,11 +478,13 @@ class _Layout:
     flags: np.ndarray  # uint8: 1 ground, 2 bonnet, 4 ceiling
     reads_atlas: np.ndarray  # bool per pixel: not ceiling (a constant grey)
     cuts: np.ndarray  # per row: columns where reads_atlas, code or flags change (+ width)
+    seg_code: np.ndarray  # per row and segment between cuts: its code
+    seg_reads: np.ndarray  # … and whether it reads the atlas
     block_start: np.ndarray  # ``_block_bounds`` of the pixel layout
     block_bounds: np.ndarray
     block_walls: np.ndarray
     block_cols: int  # image blocks per row
-    pixel_key: tuple  # key of its ``_PixelLayout``: what window packings depend on
+    pixel_key: int  # uid of its ``_PixelLayout``: what window packings depend on
     pixel: _PixelLayout
     levels: int  # mip levels: the code of the walls
     piece_table: np.ndarray  # (levels + 2, 3) float32 per code: scale, atlas offsets x, y
@@ -480,20 +503,30 @@ class _PixelLayout:
     flags: np.ndarray
     reads_atlas: np.ndarray
     cuts: np.ndarray
+    seg_code: np.ndarray
+    seg_reads: np.ndarray
     block_start: np.ndarray
     block_bounds: np.ndarray
     block_walls: np.ndarray
+    uid: int  # serial number (``_pixel_layout_ids``)
 
 
-def _switch_columns(switch: np.ndarray) -> np.ndarray:
+def _segments(switch: np.ndarray, code: np.ndarray, reads: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per row, the columns c where ``switch[:, c - 1]`` (a change between columns c − 1
-    and c) holds, padded with the width."""
-    h, w = switch.shape[0], switch.shape[1] + 1
+    and c) holds, padded with the width; and per segment between them (segment i ends at
+    cut i) the ``code`` and ``reads`` of its first pixel."""
+    h, w = code.shape
     cuts = np.full((h, max(1, int(switch.sum(axis=1).max()))), w, np.int64)
+    seg_code = np.zeros((h, cuts.shape[1] + 1), np.uint8)
+    seg_reads = np.zeros((h, cuts.shape[1] + 1), np.bool_)
     for r in range(h):
         found = np.flatnonzero(switch[r]) + 1
         cuts[r, :len(found)] = found
-    return cuts
+        first = np.concatenate(([0], found))
+        seg_code[r, :len(first)] = code[r, first]
+        seg_reads[r, :len(first)] = reads[r, first]
+    return cuts, seg_code, seg_reads
 
 
 class Renderer:
@@ -515,6 +548,7 @@ class Renderer:
         self._stacks: dict[tuple, _Stack] = {}
         self._effect_maps: dict[Effects, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self._scratch: dict[tuple, np.ndarray] = {}
+        self._pass_buffers: dict[bool, tuple[np.ndarray, ...]] = {}  # with light or not
         self._windows: dict[tuple, tuple[tuple[int, int, int, int], ...]] = {}
         self._last_effect_maps: tuple[Effects, tuple] | None = None
         # A fixed table of N(0, 1) noise; each frame reads it at its own offset.
@@ -576,6 +610,7 @@ class Renderer:
         # Pieces end where the code or the flags change (``reads_atlas`` with them), so
         # every piece has one of each.
         switches = (code[:, 1:] != code[:, :-1]) | (flags[:, 1:] != flags[:, :-1])
+        cuts, seg_code, seg_reads = _segments(switches, code, flags != 4)
         return _PixelLayout(
             coord_a=np.where(is_ground, g.gx, wall_col).astype(f32),
             coord_b=np.where(is_ground, g.gy, _PAD).astype(f32),
@@ -583,16 +618,19 @@ class Renderer:
             code=code,
             flags=flags,
             reads_atlas=flags != 4,
-            cuts=_switch_columns(switches),
+            cuts=cuts,
+            seg_code=seg_code,
+            seg_reads=seg_reads,
             block_start=block_start,
             block_bounds=block_bounds,
             block_walls=block_walls,
+            uid=next(_pixel_layout_ids),
         )
 
     def _build_layout(self, scene: Scene) -> _Layout:
         """The scene's layout: the cached pixel layout plus where this atlas puts its
         levels and walls (the same float64 sums as ever, rounded to float32 once)."""
-        base, pixel_key = self._pixel_layout(scene)
+        base, _ = self._pixel_layout(scene)
         levels = scene.levels
         origin = scene.level_origin
         bias = np.zeros((2, levels + 2))
@@ -608,9 +646,10 @@ class Renderer:
         return _Layout(
             coord_a=base.coord_a, coord_b=base.coord_b, wall_row=base.wall_row,
             code=base.code, flags=base.flags, reads_atlas=base.reads_atlas, cuts=base.cuts,
+            seg_code=base.seg_code, seg_reads=base.seg_reads,
             block_start=base.block_start, block_bounds=base.block_bounds,
             block_walls=base.block_walls,
-            block_cols=-(-base.flags.shape[1] // FOOTPRINT_BLOCK_PX), pixel_key=pixel_key,
+            block_cols=-(-base.flags.shape[1] // FOOTPRINT_BLOCK_PX), pixel_key=base.uid,
             pixel=base, levels=levels, piece_table=table,
             wall_y=float(scene.wall_origin[1]),
         )
@@ -618,20 +657,24 @@ class Renderer:
     def _buffers(self, st: _Stack, with_light: bool
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Scratch arrays for a packing: planar atlas maps, light maps, the sampled light
-        and the sampled atlas, whose tail past the sampled pixels stays 0 (ceiling
-        pieces read it)."""
-        key = ("pass", st.tex_rows, st.zero_len, with_light)
-        bufs = self._scratch.get(key)
-        if bufs is None:
-            n_tex = st.tex_rows * _PACK
-            if len(self._scratch) > 64:
-                self._scratch.clear()
-            bufs = self._scratch[key] = (
-                np.empty((2, st.tex_rows, _PACK), np.float32),
-                np.empty((2, st.tex_rows, _PACK) if with_light else (2, 1, 1), np.float32),
-                np.empty((n_tex + st.zero_len, 2) if with_light else (1, 2), np.uint8),
-                np.zeros(n_tex + st.zero_len, np.uint8))
-        return bufs
+        and the sampled atlas, whose tail past the sampled pixels is 0 (ceiling pieces
+        read it). Views of buffers that only grow: the ROIs' packings differ every frame,
+        and fresh arrays cost allocations and page faults."""
+        rows, tail = st.tex_rows, st.zero_len
+        n_tex = rows * _PACK
+        bufs = self._pass_buffers.get(with_light)
+        if bufs is None or bufs[0].shape[1] < rows or len(bufs[3]) < n_tex + tail:
+            cap = max(rows, bufs[0].shape[1] if bufs is not None else 0)
+            size = cap * _PACK + max(tail, self.camera.width)
+            bufs = self._pass_buffers[with_light] = (
+                np.empty((2, cap, _PACK), np.float32),
+                np.empty((2, cap, _PACK) if with_light else (2, 1, 1), np.float32),
+                np.empty((size, 2) if with_light else (1, 2), np.uint8),
+                np.empty(size, np.uint8))
+        tex = bufs[3][:n_tex + tail]
+        tex[n_tex:] = 0  # an earlier, larger packing may have sampled there
+        return (bufs[0][:, :rows], bufs[1][:, :rows] if with_light else bufs[1],
+                bufs[2][:n_tex + tail] if with_light else bufs[2], tex)
 
     def _buffer(self, name: str, shape: tuple[int, ...], dtype: type) -> np.ndarray:
         """A reusable scratch array (fresh large arrays cost page faults every frame)."""
@@ -772,30 +815,28 @@ class Renderer:
     def _stack(self, boxes: tuple, layout: _Layout) -> _Stack:
         """How the windows' pixels are packed (cached per window list and pixel layout:
         the same for every track)."""
-        key = (boxes, layout.pixel_key)
+        key = (layout.pixel_key, boxes)
         cached = self._stacks.get(key)
         if cached is not None:
             return cached
-        box_array = np.array(boxes, np.int64)
-        pieces, (s_rows, s_cols, s_widths, s_offsets, s_codes), tex_rows = _pack_pieces(
-            box_array, layout.reads_atlas, layout.code, layout.cuts, _PACK)
-        rows, cols, widths, out_offsets, tex_offsets = pieces
-        level_bounds, wall_lo, wall_hi = _view_bounds(
-            box_array, layout.block_start, layout.block_bounds, layout.block_walls,
+        pieces, s_pieces, tex_rows, level_bounds, wall_lo, wall_hi = _pack_windows(
+            np.array(boxes, np.int64), layout.cuts, layout.seg_reads, layout.seg_code, _PACK,
+            layout.block_start, layout.block_bounds, layout.block_walls,
             FOOTPRINT_BLOCK_PX, layout.block_cols)
-        window_offsets = [0]
-        for _, _, ww, wh in boxes[:-1]:
-            window_offsets.append(window_offsets[-1] + ww * wh)
-        stack = _Stack(rows=rows, cols=cols, widths=widths, out_offsets=out_offsets,
-                       tex_offsets=tex_offsets, s_rows=s_rows, s_cols=s_cols,
-                       s_widths=s_widths, s_offsets=s_offsets, s_codes=s_codes,
-                       tex_rows=tex_rows,
-                       zero_len=max(ww for _, _, ww, _ in boxes),
-                       out_len=int(out_offsets[-1] + widths[-1]),
-                       window_offsets=window_offsets, level_bounds=level_bounds,
-                       wall_rows=(wall_lo, wall_hi))
-        if len(self._stacks) >= 32:
-            self._stacks.pop(next(iter(self._stacks)))
+        window_offsets = []
+        out_len = zero_len = 0
+        for _, _, ww, wh in boxes:
+            window_offsets.append(out_len)
+            out_len += ww * wh
+            zero_len = max(zero_len, ww)
+        stack = _Stack(rows=pieces[0], cols=pieces[1], widths=pieces[2],
+                       out_offsets=pieces[3], tex_offsets=pieces[4], s_rows=s_pieces[0],
+                       s_cols=s_pieces[1], s_widths=s_pieces[2], s_offsets=s_pieces[3],
+                       s_codes=s_pieces[4], tex_rows=tex_rows, zero_len=zero_len,
+                       out_len=out_len, window_offsets=window_offsets,
+                       level_bounds=level_bounds, wall_rows=(wall_lo, wall_hi))
+        if len(self._stacks) >= 32:  # the ROIs move every frame: few packings come back
+            self._stacks.clear()  # (popping the oldest of a dict of tuples costs µs)
         self._stacks[key] = stack
         return stack
 
