@@ -166,42 +166,59 @@ _combine_params_jit = njit(cache=True)(_combine_params)
 
 @njit(cache=True, error_model="numpy")
 def _combine(out: np.ndarray, out_offsets: np.ndarray, rows: np.ndarray, cols: np.ndarray,
-             widths: np.ndarray, tex_offsets: np.ndarray, tex: np.ndarray, flags: np.ndarray,
-             gain: np.ndarray, sheen: np.ndarray, noise: np.ndarray, noise_offset: int,
-             image_width: int, params: np.ndarray) -> None:
+             widths: np.ndarray, tex_offsets: np.ndarray, piece_flags: np.ndarray,
+             tex: np.ndarray, gain: np.ndarray, sheen: np.ndarray, noise: np.ndarray,
+             noise_offset: int, image_width: int, params: np.ndarray) -> None:
     """Final grey levels of the row pieces, written to the flat ``out`` from
     ``out_offsets[t]`` on, from the sampled atlas ``tex`` (paint coverage on the ground, wall
-    texture elsewhere) read from ``tex_offsets[t]`` on. ``flags``: 1 ground, 2 bonnet,
-    4 ceiling. Branch-free so that it vectorises (0/1 factors blend exactly); the rare
-    cases have their own passes (``_combine_lit``, ``_paint_obstacles``), which keeps this
-    loop short: pieces of ROIs are only 150–180 px wide."""
+    texture elsewhere) read from ``tex_offsets[t]`` on. Every pixel of piece t has the
+    flags ``piece_flags[t]`` (1 ground, 2 bonnet, 4 ceiling): one branch per piece picks
+    the formula, and each loop is short and vectorises. The rare cases have their own
+    passes (``_combine_lit``, ``_paint_obstacles``)."""
     mat, k_line, wall_k, bonnet_dn, refl, sigma, ceiling = _combine_params_jit(params)
     zero = np.float32(0.0)
-    one = np.float32(1.0)
     top = np.float32(255.0)
     half = np.float32(0.5)
     for t in range(len(rows)):
         r = rows[t]
         c0 = cols[t]
         width = widths[t]
-        fl = flags[r, c0:c0 + width]
+        f = piece_flags[t]
         ga = gain[r, c0:c0 + width]
-        sh = sheen[r, c0:c0 + width]
         start = noise_offset + r * image_width + c0
         nz = noise[start:start + width]
         tx = tex[tex_offsets[t]:tex_offsets[t] + width]
         o = out[out_offsets[t]:out_offsets[t] + width]
-        for j in range(width):
-            f = fl[j]
-            is_g = np.float32(f & 1)
-            is_b = np.float32((f >> 1) & 1)
-            is_c = np.float32((f >> 2) & 1)
-            value = np.float32(tx[j])
-            w = is_c * ceiling + (one - is_c) * (wall_k * value)
-            v = is_g * (mat + k_line * value + np.float32(sh[j])) + (one - is_g) * w
-            v = is_b * (bonnet_dn + refl * v) + (one - is_b) * v
-            v = v * ga[j] + sigma * np.float32(nz[j])
-            o[j] = np.uint8(min(max(v, zero), top) + half)
+        # Paint on the mat, the wall texture or the ceiling's grey, then the bonnet with
+        # its reflection of that; exposure × vignetting and noise; 8-bit rounding.
+        if f & 1:
+            sh = sheen[r, c0:c0 + width]
+            if f & 2:
+                for j in range(width):
+                    v = bonnet_dn + refl * (mat + k_line * np.float32(tx[j])
+                                            + np.float32(sh[j]))
+                    v = v * ga[j] + sigma * np.float32(nz[j])
+                    o[j] = np.uint8(min(max(v, zero), top) + half)
+            else:
+                for j in range(width):
+                    v = mat + k_line * np.float32(tx[j]) + np.float32(sh[j])
+                    v = v * ga[j] + sigma * np.float32(nz[j])
+                    o[j] = np.uint8(min(max(v, zero), top) + half)
+        elif f & 4:
+            base = bonnet_dn + refl * ceiling if f & 2 else ceiling
+            for j in range(width):
+                v = base * ga[j] + sigma * np.float32(nz[j])
+                o[j] = np.uint8(min(max(v, zero), top) + half)
+        elif f & 2:
+            for j in range(width):
+                v = bonnet_dn + refl * (wall_k * np.float32(tx[j]))
+                v = v * ga[j] + sigma * np.float32(nz[j])
+                o[j] = np.uint8(min(max(v, zero), top) + half)
+        else:
+            for j in range(width):
+                v = wall_k * np.float32(tx[j])
+                v = v * ga[j] + sigma * np.float32(nz[j])
+                o[j] = np.uint8(min(max(v, zero), top) + half)
 
 
 @njit(cache=True, error_model="numpy")
@@ -269,17 +286,19 @@ def _paint_obstacles(out: np.ndarray, out_offsets: np.ndarray, rows: np.ndarray,
 
 @njit(cache=True)
 def _pack_pieces(boxes: np.ndarray, cuts: np.ndarray, seg_reads: np.ndarray,
-                 seg_code: np.ndarray, pack: int) -> tuple[np.ndarray, np.ndarray, int]:
+                 seg_code: np.ndarray, seg_flags: np.ndarray, pack: int
+                 ) -> tuple[np.ndarray, np.ndarray, int]:
     """Cut every row of the windows ``boxes`` ``(k, 4)`` (x, y, w, h) [px] into pieces of
     one pixel code (``_atlas_maps``) and flags: ``cuts[r]`` lists the columns where row r
     changes them, padded with the image width, and segment i of row r (up to column
-    ``cuts[r, i]``) has code ``seg_code[r, i]`` and reads the atlas if ``seg_reads[r, i]``
+    ``cuts[r, i]``) has code ``seg_code[r, i]``, flags ``seg_flags[r, i]`` and reads the
+    atlas if ``seg_reads[r, i]``
     (ceiling pixels are a constant grey, not sampled). Per-row tables, not lookups in the
     image-sized arrays: those are cold in cache here and cost µs.
 
-    Returns ``(5, n)``: row, first column, width, offset in the output and offset in the
-    sampled buffer of each piece (ceiling runs: the zero tail after the sampled pixels,
-    rounded up to whole rows of ``pack``); ``(5, m)``: row, first column, width, sampled
+    Returns ``(6, n)``: row, first column, width, offset in the output, offset in the
+    sampled buffer (ceiling runs: the zero tail after the sampled pixels, rounded up to
+    whole rows of ``pack``) and flags of each piece; ``(5, m)``: row, first column, width, sampled
     offset and code of the m sampled pieces; the rows of ``pack`` sampled. One call: the
     ROIs move every frame, so this runs every frame."""
     n_cuts = cuts.shape[1]
@@ -290,7 +309,7 @@ def _pack_pieces(boxes: np.ndarray, cuts: np.ndarray, seg_reads: np.ndarray,
             n += 1
             for i in range(n_cuts):
                 n += x0 < cuts[r, i] < x0 + w
-    out = np.empty((5, n), np.int64)
+    out = np.empty((6, n), np.int64)
     seg = np.empty(n, np.int64)
     t = 0
     out_at = 0
@@ -309,6 +328,7 @@ def _pack_pieces(boxes: np.ndarray, cuts: np.ndarray, seg_reads: np.ndarray,
                 sampled = seg_reads[r, i]
                 out[0, t], out[1, t], out[2, t], out[3, t] = r, start, width, out_at
                 out[4, t] = tex_at if sampled else -1
+                out[5, t] = seg_flags[r, i]
                 seg[t] = i
                 tex_at += width if sampled else 0
                 n_sampled += sampled
@@ -424,11 +444,13 @@ def _view_bounds(boxes: np.ndarray, start: np.ndarray, bounds: np.ndarray,
 
 @njit(cache=True)
 def _pack_windows(boxes: np.ndarray, cuts: np.ndarray, seg_reads: np.ndarray,
-                  seg_code: np.ndarray, pack: int, start: np.ndarray, bounds: np.ndarray,
-                  walls: np.ndarray, block: int, n_block_cols: int) -> tuple:
+                  seg_code: np.ndarray, seg_flags: np.ndarray, pack: int, start: np.ndarray,
+                  bounds: np.ndarray, walls: np.ndarray, block: int, n_block_cols: int
+                  ) -> tuple:
     """``_pack_pieces`` and ``_view_bounds`` of the windows ``boxes`` in one call (each
     call from Python costs µs, and this runs every frame)."""
-    pieces, s_pieces, tex_rows = _pack_pieces(boxes, cuts, seg_reads, seg_code, pack)
+    pieces, s_pieces, tex_rows = _pack_pieces(boxes, cuts, seg_reads, seg_code, seg_flags,
+                                              pack)
     level_bounds, wall_lo, wall_hi = _view_bounds(boxes, start, bounds, walls, block,
                                                   n_block_cols)
     return pieces, s_pieces, tex_rows, level_bounds, wall_lo, wall_hi
@@ -451,6 +473,7 @@ class _Stack:
     widths: np.ndarray
     out_offsets: np.ndarray
     tex_offsets: np.ndarray
+    flags: np.ndarray  # of each piece (one value per piece: they are cut where it changes)
     s_rows: np.ndarray
     s_cols: np.ndarray
     s_widths: np.ndarray
@@ -478,7 +501,8 @@ class _Layout:
     flags: np.ndarray  # uint8: 1 ground, 2 bonnet, 4 ceiling
     reads_atlas: np.ndarray  # bool per pixel: not ceiling (a constant grey)
     cuts: np.ndarray  # per row: columns where reads_atlas, code or flags change (+ width)
-    seg_code: np.ndarray  # per row and segment between cuts: its code
+    seg_code: np.ndarray  # per row and segment between cuts: its code, its flags
+    seg_flags: np.ndarray
     seg_reads: np.ndarray  # … and whether it reads the atlas
     block_start: np.ndarray  # ``_block_bounds`` of the pixel layout
     block_bounds: np.ndarray
@@ -504,6 +528,7 @@ class _PixelLayout:
     reads_atlas: np.ndarray
     cuts: np.ndarray
     seg_code: np.ndarray
+    seg_flags: np.ndarray
     seg_reads: np.ndarray
     block_start: np.ndarray
     block_bounds: np.ndarray
@@ -511,22 +536,24 @@ class _PixelLayout:
     uid: int  # serial number (``_pixel_layout_ids``)
 
 
-def _segments(switch: np.ndarray, code: np.ndarray, reads: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _segments(switch: np.ndarray, code: np.ndarray, flags: np.ndarray, reads: np.ndarray
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per row, the columns c where ``switch[:, c - 1]`` (a change between columns c − 1
     and c) holds, padded with the width; and per segment between them (segment i ends at
-    cut i) the ``code`` and ``reads`` of its first pixel."""
+    cut i) the ``code``, ``flags`` and ``reads`` of its first pixel."""
     h, w = code.shape
     cuts = np.full((h, max(1, int(switch.sum(axis=1).max()))), w, np.int64)
     seg_code = np.zeros((h, cuts.shape[1] + 1), np.uint8)
+    seg_flags = np.zeros((h, cuts.shape[1] + 1), np.uint8)
     seg_reads = np.zeros((h, cuts.shape[1] + 1), np.bool_)
     for r in range(h):
         found = np.flatnonzero(switch[r]) + 1
         cuts[r, :len(found)] = found
         first = np.concatenate(([0], found))
         seg_code[r, :len(first)] = code[r, first]
+        seg_flags[r, :len(first)] = flags[r, first]
         seg_reads[r, :len(first)] = reads[r, first]
-    return cuts, seg_code, seg_reads
+    return cuts, seg_code, seg_flags, seg_reads
 
 
 class Renderer:
@@ -610,7 +637,7 @@ class Renderer:
         # Pieces end where the code or the flags change (``reads_atlas`` with them), so
         # every piece has one of each.
         switches = (code[:, 1:] != code[:, :-1]) | (flags[:, 1:] != flags[:, :-1])
-        cuts, seg_code, seg_reads = _segments(switches, code, flags != 4)
+        cuts, seg_code, seg_flags, seg_reads = _segments(switches, code, flags, flags != 4)
         return _PixelLayout(
             coord_a=np.where(is_ground, g.gx, wall_col).astype(f32),
             coord_b=np.where(is_ground, g.gy, _PAD).astype(f32),
@@ -620,6 +647,7 @@ class Renderer:
             reads_atlas=flags != 4,
             cuts=cuts,
             seg_code=seg_code,
+            seg_flags=seg_flags,
             seg_reads=seg_reads,
             block_start=block_start,
             block_bounds=block_bounds,
@@ -646,7 +674,7 @@ class Renderer:
         return _Layout(
             coord_a=base.coord_a, coord_b=base.coord_b, wall_row=base.wall_row,
             code=base.code, flags=base.flags, reads_atlas=base.reads_atlas, cuts=base.cuts,
-            seg_code=base.seg_code, seg_reads=base.seg_reads,
+            seg_code=base.seg_code, seg_flags=base.seg_flags, seg_reads=base.seg_reads,
             block_start=base.block_start, block_bounds=base.block_bounds,
             block_walls=base.block_walls,
             block_cols=-(-base.flags.shape[1] // FOOTPRINT_BLOCK_PX), pixel_key=base.uid,
@@ -788,7 +816,7 @@ class Renderer:
             _combine_lit(*pieces, st.tex_offsets, sampled, light.reshape(-1), layout.flags,
                          gain, sheen, self._noise, noise_offset, width, params)
         else:
-            _combine(*pieces, st.tex_offsets, sampled, layout.flags, gain, sheen, self._noise,
+            _combine(*pieces, st.tex_offsets, st.flags, sampled, gain, sheen, self._noise,
                      noise_offset, width, params)
         if drawn is not None:
             (ox0, oy0), ids, shades = drawn
@@ -820,7 +848,8 @@ class Renderer:
         if cached is not None:
             return cached
         pieces, s_pieces, tex_rows, level_bounds, wall_lo, wall_hi = _pack_windows(
-            np.array(boxes, np.int64), layout.cuts, layout.seg_reads, layout.seg_code, _PACK,
+            np.array(boxes, np.int64), layout.cuts, layout.seg_reads, layout.seg_code,
+            layout.seg_flags, _PACK,
             layout.block_start, layout.block_bounds, layout.block_walls,
             FOOTPRINT_BLOCK_PX, layout.block_cols)
         window_offsets = []
@@ -830,7 +859,8 @@ class Renderer:
             out_len += ww * wh
             zero_len = max(zero_len, ww)
         stack = _Stack(rows=pieces[0], cols=pieces[1], widths=pieces[2],
-                       out_offsets=pieces[3], tex_offsets=pieces[4], s_rows=s_pieces[0],
+                       out_offsets=pieces[3], tex_offsets=pieces[4], flags=pieces[5],
+                       s_rows=s_pieces[0],
                        s_cols=s_pieces[1], s_widths=s_pieces[2], s_offsets=s_pieces[3],
                        s_codes=s_pieces[4], tex_rows=tex_rows, zero_len=zero_len,
                        out_len=out_len, window_offsets=window_offsets,

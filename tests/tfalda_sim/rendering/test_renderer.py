@@ -276,3 +276,52 @@ def test_numpy_frame_seeds_and_hashable_camera(renderer: Renderer) -> None:
     assert np.array_equal(renderer.render(scene, pose, frame_seed=big),
                           renderer.render(scene, pose, frame_seed=int(big)))
     assert len({renderer.camera, renderer.camera, scene}) == 2
+
+
+def _blended_combine(tex: np.ndarray, flags: np.ndarray, gain: np.ndarray, sheen: np.ndarray,
+                     noise: np.ndarray, params: np.ndarray) -> np.ndarray:
+    """The combine pass as it was per pixel: every formula computed, the pixel's own
+    selected by 0/1 factors of its flags (float32 throughout)."""
+    from tfalda_sim.rendering.renderer import _combine_params
+
+    mat, k_line, wall_k, bonnet_dn, refl, sigma, ceiling = _combine_params(params)
+    f32 = np.float32
+    one = f32(1.0)
+    is_g, is_b, is_c = ((flags >> k) & 1 for k in range(3))
+    is_g, is_b, is_c = (x.astype(f32) for x in (is_g, is_b, is_c))
+    value = tex.astype(f32)
+    w = is_c * ceiling + (one - is_c) * (wall_k * value)
+    v = is_g * (mat + k_line * value + sheen.astype(f32)) + (one - is_g) * w
+    v = is_b * (bonnet_dn + refl * v) + (one - is_b) * v
+    v = v * gain + sigma * noise.astype(f32)
+    return (np.minimum(np.maximum(v, f32(0.0)), f32(255.0)) + f32(0.5)).astype(np.uint8)
+
+
+def test_combine_per_piece_equals_the_per_pixel_blend() -> None:
+    """The combine pass picks one formula per piece (its pixels share their flags); it
+    must give the per-pixel blend's grey levels bit for bit, for every combination of
+    ground, bonnet and ceiling, at clipping levels too."""
+    from tfalda_sim.rendering.renderer import _combine
+
+    rng = np.random.default_rng(5)
+    width, rows = 64, 8
+    flags_of_row = np.array([0, 1, 2, 3, 4, 6, 1, 0], np.uint8)  # every case the layout has
+    flags = np.repeat(flags_of_row[:, None], width, axis=1)
+    gain = rng.uniform(0.2, 3.0, (rows, width)).astype(np.float32)
+    sheen = rng.integers(0, 60, (rows, width), dtype=np.uint8)
+    noise = rng.integers(-127, 128, rows * width + 16, dtype=np.int8)
+    tex = rng.integers(0, 256, rows * width, dtype=np.uint8)
+    params = np.array([40.0, 230.0, 90.0, 12.0, 0.15, 3.0, 1.25 * 90.0])
+    # One piece per row, in a shuffled order of the output.
+    order = rng.permutation(rows)
+    r = np.arange(rows, dtype=np.int64)[order]
+    out = np.empty(rows * width, np.uint8)
+    offsets = np.arange(rows, dtype=np.int64) * width
+    _combine(out, offsets, r, np.zeros(rows, np.int64), np.full(rows, width, np.int64),
+             r * width, flags_of_row[r].astype(np.int64), tex, gain, sheen, noise, 7, width,
+             params)
+    want = _blended_combine(tex.reshape(rows, width), flags, gain, sheen,
+                            noise[7:7 + rows * width].reshape(rows, width), params)
+    got = out.reshape(rows, width)[np.argsort(order)]
+    assert (got == want).all()
+    assert (got == 255).any() and (got == 0).any()  # both clips are exercised
