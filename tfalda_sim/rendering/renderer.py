@@ -5,11 +5,12 @@ in the car frame, its footprint on the ground and therefore its mip level are co
 computed once (``PixelGeometry``). Per frame and pixel:
 
 1. *maps* (numba, vectorised): the ground hit moved to the world by the car pose and
-   turned into a texel coordinate of the pixel's own mip level inside the mip atlas;
-2. *ground*: one ``cv2.remap`` (bilinear, SIMD) of the atlas for all ground pixels: far
-   dashes are pre-filtered, so they fade instead of shimmering or vanishing;
-3. *walls*: one ``cv2.remap`` of the wall texture, shifted by the car's yaw;
-4. *combine* (numba, vectorised): floor sheen, shadows and glare, the bonnet with its
+   turned into a texel coordinate of the pixel's own mip level inside the mip atlas
+   (walls: a column of the wall texture, shifted by the car's yaw);
+2. *sampling* (numba): bilinear samples of the atlas, the arithmetic bit for bit that of
+   OpenCV's ``cv2.remap``, which did this before; far dashes are pre-filtered, so they
+   fade instead of shimmering or vanishing;
+3. *combine* (numba, vectorised): floor sheen, shadows and glare, the bonnet with its
    faint reflection, obstacles, exposure × vignetting, sensor noise, 8-bit rounding.
 
 Every step depends only on the pixel and the frame (the noise is read from a fixed bank
@@ -25,7 +26,10 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from ..camera import Camera, FisheyeCamera
 from .effects import Effects
@@ -61,22 +65,116 @@ def _texel_transform(affine: np.ndarray, size_x: float, size_y: float) -> tuple:
             f(affine[5]), f(-2.0), f(size_x + 1.0), f(size_y + 1.0))
 
 
+@intrinsic
+def _fma32(typingctx, a, b, c):  # type: ignore[no-untyped-def]  # numba's signature
+    """``a · b + c`` rounded once (float32): what OpenCV's SIMD remap computes."""
+    if not all(t == types.float32 for t in (a, b, c)):
+        return None
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        f32 = ir.FloatType()
+        fma = cgutils.get_or_insert_function(builder.module, ir.FunctionType(f32, [f32] * 3),
+                                             "llvm.fma.f32")
+        return builder.call(fma, args)
+
+    return types.float32(types.float32, types.float32, types.float32), codegen
+
+
+@intrinsic
+def _load_pair(typingctx, flat, k):  # type: ignore[no-untyped-def]  # numba's signature
+    """``flat[k] | flat[k + 1] << 8`` (uint8 array, in bounds) as one unaligned 16-bit
+    load: the two horizontal taps of a bilinear sample (x86 and ARM are little-endian)."""
+    if not (isinstance(flat, types.Array) and flat.dtype == types.uint8
+            and isinstance(k, types.Integer)):
+        return None
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        data = context.make_array(signature.args[0])(context, builder, args[0]).data
+        pair = builder.bitcast(builder.gep(data, [args[1]]), ir.IntType(16).as_pointer())
+        return builder.load(pair, align=1)
+
+    return types.uint16(flat, k), codegen
+
+
 @njit(cache=True, error_model="numpy")
-def _atlas_maps(map_x: np.ndarray, map_y: np.ndarray, rows: np.ndarray, cols: np.ndarray,
-                widths: np.ndarray, offsets: np.ndarray, codes: np.ndarray,
-                coord_a: np.ndarray, coord_b: np.ndarray, wall_row: np.ndarray,
-                piece_table: np.ndarray, levels: int, wall_y: float, affine: np.ndarray,
-                size_x: float, size_y: float, wall_shift: float, wall_cols: float) -> None:
-    """Atlas coordinates (pixel centres at integers) of the requested row pieces, packed
-    back to back: piece t is image row ``rows[t]``, columns ``cols[t]`` … + ``widths[t]``,
-    written to the flat ``map_x`` and ``map_y`` from pixel ``offsets[t]`` on (planar maps:
-    contiguous stores here, and OpenCV's remap reads them faster than interleaved ones).
+def _taps_at_border(flat: np.ndarray, h: int, w: int, ix: int, iy: int) -> tuple[int, int]:
+    """``_load_pair`` of rows ``iy`` and ``iy + 1`` at column ``ix`` for a sample that is
+    not inside the atlas: taps outside read 0."""
+    a = 0
+    b = 0
+    for dy in range(2):
+        y = iy + dy
+        for dx in range(2):
+            x = ix + dx
+            if 0 <= x < w and 0 <= y < h:
+                v = np.int64(flat[y * w + x]) << (8 * dx)
+                if dy == 0:
+                    a |= v
+                else:
+                    b |= v
+    return a, b
+
+
+@njit(cache=True, error_model="numpy", inline="always")  # called per row piece
+def _bilinear(out: np.ndarray, flat: np.ndarray, h: np.int32, w: np.int32, mx: np.ndarray,
+              my: np.ndarray, frac_x: np.ndarray, frac_y: np.ndarray, at: np.ndarray,
+              top: np.ndarray, bottom: np.ndarray) -> None:
+    """``out[j]`` = the ``h`` × ``w`` image ``flat`` (uint8, row-major) at ``(mx[j],
+    my[j])`` [texels, centres at integers], bilinear, taps outside reading 0: what
+    ``cv2.remap(INTER_LINEAR, BORDER_CONSTANT, 0)`` of OpenCV ≥ 4.11 computes for a uint8
+    image and float maps (float32 weights, fused multiply-adds, rounded half to even),
+    the renderer's sampler before (``tests`` compare the two). Three loops, so that the
+    arithmetic ones vectorise and only the loads (two 16-bit pairs per sample) stay
+    scalar: scratch of at least ``len(mx)`` float32 ``frac_x``, ``frac_y``, int32 ``at``,
+    uint16 ``top``, ``bottom``."""
+    n = len(mx)
+    for j in range(n):
+        x = mx[j]
+        y = my[j]
+        ix = np.int32(x)
+        ix -= np.int32(np.float32(ix) > x)  # floor (x may be negative: padding)
+        iy = np.int32(y)
+        iy -= np.int32(np.float32(iy) > y)
+        frac_x[j] = x - np.float32(ix)
+        frac_y[j] = y - np.float32(iy)
+        inside = (ix >= 0) & (ix < w - 1) & (iy >= 0) & (iy < h - 1)
+        at[j] = iy * w + ix if inside else np.int32(-1)
+    for j in range(n):
+        k = at[j]
+        if k >= 0:
+            top[j] = _load_pair(flat, k)
+            bottom[j] = _load_pair(flat, k + w)
+        else:
+            top[j], bottom[j] = _taps_at_border(flat, h, w, int(math.floor(mx[j])),
+                                                int(math.floor(my[j])))
+    magic = np.float32(1 << 23)  # x + 2^23 − 2^23 rounds 0 ≤ x < 2^22 half to even
+    for j in range(n):
+        p00 = np.float32(top[j] & 255)
+        p01 = np.float32(top[j] >> 8)
+        p10 = np.float32(bottom[j] & 255)
+        p11 = np.float32(bottom[j] >> 8)
+        v0 = _fma32(frac_x[j], p01 - p00, p00)
+        v1 = _fma32(frac_x[j], p11 - p10, p10)
+        v = _fma32(frac_y[j], v1 - v0, v0)  # in [0, 255]
+        out[j] = np.uint8(np.int32((v + magic) - magic))
+
+
+@njit(cache=True, error_model="numpy")
+def _sample_atlas(tex: np.ndarray, atlas: np.ndarray, rows: np.ndarray, cols: np.ndarray,
+                  widths: np.ndarray, offsets: np.ndarray, codes: np.ndarray,
+                  coord_a: np.ndarray, coord_b: np.ndarray, wall_row: np.ndarray,
+                  piece_table: np.ndarray, levels: int, wall_y: float, affine: np.ndarray,
+                  size_x: float, size_y: float, wall_shift: float, wall_cols: float) -> None:
+    """The atlas sampled (``_bilinear``) at every pixel of the requested row pieces,
+    packed back to back: piece t is image row ``rows[t]``, columns ``cols[t]`` … +
+    ``widths[t]``, written to the flat ``tex`` from ``offsets[t]`` on. A piece's atlas
+    coordinates (pixel centres at integers) go to a small scratch first, in a loop that
+    vectorises; sampling reads it while it is in cache.
 
     Every pixel of a piece has the same code ``codes[t]`` (the pieces are cut where it
     changes): a mip level on the ground, ``levels`` on the walls, ``levels + 1`` for the
     ceiling; ``piece_table[code]`` holds its scale (``2^-level``, 0 off the ground) and its
-    atlas offsets (x, y). So a pixel reads only its two coordinates: the loop is bound by
-    memory, and per-pixel scale and offset tables doubled its traffic.
+    atlas offsets (x, y). So a pixel reads only its two coordinates.
 
     Ground: ``(coord_a, coord_b)`` is the ground hit in the car frame [m], moved to level-0
     texels by ``affine`` and into the level by the scale and offsets. Walls: ``coord_a`` is
@@ -86,7 +184,13 @@ def _atlas_maps(map_x: np.ndarray, map_y: np.ndarray, rows: np.ndarray, cols: np
     a00, a01, a02, a10, a11, a12, lo, hx, hy = _texel_transform(affine, size_x, size_y)
     shift = np.float32(wall_shift)
     wrap = np.float32(wall_cols)
-    end = 0
+    mx = np.empty(coord_a.shape[1], np.float32)
+    my = np.empty(coord_a.shape[1], np.float32)
+    h32, w32 = np.int32(atlas.shape[0]), np.int32(atlas.shape[1])  # < 2^31 texels
+    flat = atlas.reshape(-1)
+    n = coord_a.shape[1]
+    frac_x, frac_y = np.empty(n, np.float32), np.empty(n, np.float32)
+    at, top, bottom = np.empty(n, np.int32), np.empty(n, np.uint16), np.empty(n, np.uint16)
     for t in range(len(rows)):
         r = rows[t]
         c0 = cols[t]
@@ -96,9 +200,6 @@ def _atlas_maps(map_x: np.ndarray, map_y: np.ndarray, rows: np.ndarray, cols: np
         bx = piece_table[code, 1]
         by = piece_table[code, 2]
         ar = coord_a[r, c0:c0 + width]
-        start = offsets[t]
-        mx = map_x[start:start + width]  # slices of flat views: no per-row reshape
-        my = map_y[start:start + width]
         if code < levels:
             br = coord_b[r, c0:c0 + width]
             for j in range(width):
@@ -117,8 +218,8 @@ def _atlas_maps(map_x: np.ndarray, map_y: np.ndarray, rows: np.ndarray, cols: np
             else:
                 for j in range(width):
                     my[j] = coord_b[r, c0 + j]
-        end = max(end, start + width)
-    _pad_tail(map_x, map_y, end)
+        _bilinear(tex[offsets[t]:offsets[t] + width], flat, h32, w32, mx[:width], my[:width],
+                  frac_x, frac_y, at, top, bottom)
 
 
 @njit(cache=True, error_model="numpy")
@@ -457,7 +558,8 @@ def _pack_windows(boxes: np.ndarray, cuts: np.ndarray, seg_reads: np.ndarray,
 
 
 _PACK = 1024
-"""Pixels per row of the packed buffers handed to ``cv2.remap``."""
+"""Pixels per row of the packed sample buffers (the light map is sampled by one
+``cv2.remap`` of these rows)."""
 
 
 @dataclass(slots=True, eq=False)  # not frozen: frozen fields cost µs to set, every frame
@@ -683,26 +785,27 @@ class Renderer:
         )
 
     def _buffers(self, st: _Stack, with_light: bool
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Scratch arrays for a packing: planar atlas maps, light maps, the sampled light
-        and the sampled atlas, whose tail past the sampled pixels is 0 (ceiling pieces
-        read it). Views of buffers that only grow: the ROIs' packings differ every frame,
-        and fresh arrays cost allocations and page faults."""
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Scratch arrays for a packing: planar light maps, the sampled light and the
+        sampled atlas, whose tail past the sampled pixels is 0 (ceiling pieces read it).
+        Views of buffers that only grow: the ROIs' packings differ every frame, and fresh
+        arrays cost allocations and page faults."""
         rows, tail = st.tex_rows, st.zero_len
         n_tex = rows * _PACK
         bufs = self._pass_buffers.get(with_light)
-        if bufs is None or bufs[0].shape[1] < rows or len(bufs[3]) < n_tex + tail:
-            cap = max(rows, bufs[0].shape[1] if bufs is not None else 0)
+        if bufs is None or len(bufs[2]) < n_tex + tail or (
+                with_light and bufs[0].shape[1] < rows):
+            cap = max(rows, len(bufs[2]) // _PACK if bufs is not None else 0)
             size = cap * _PACK + max(tail, self.camera.width)
             bufs = self._pass_buffers[with_light] = (
-                np.empty((2, cap, _PACK), np.float32),
                 np.empty((2, cap, _PACK) if with_light else (2, 1, 1), np.float32),
                 np.empty((size, 2) if with_light else (1, 2), np.uint8),
                 np.empty(size, np.uint8))
-        tex = bufs[3][:n_tex + tail]
+        tex = bufs[2][:n_tex + tail]
         tex[n_tex:] = 0  # an earlier, larger packing may have sampled there
-        return (bufs[0][:, :rows], bufs[1][:, :rows] if with_light else bufs[1],
-                bufs[2][:n_tex + tail] if with_light else bufs[2], tex)
+        if not with_light:
+            return bufs[0], bufs[1], tex
+        return bufs[0][:, :rows], bufs[1][:n_tex + tail], tex
 
     def _buffer(self, name: str, shape: tuple[int, ...], dtype: type) -> np.ndarray:
         """A reusable scratch array (fresh large arrays cost page faults every frame)."""
@@ -770,7 +873,7 @@ class Renderer:
         blur = len(shifts) > 1
         with_light = scene.light is not None
         n_tex = st.tex_rows * _PACK  # sampled pixels, rounded up to whole rows of _PACK
-        maps, light_maps, light, tex = self._buffers(st, with_light)
+        light_maps, light, tex = self._buffers(st, with_light)
         if blur:
             total = self._buffer("tex_sum", (n_tex + st.zero_len,), np.float32)
             total.fill(0.0)
@@ -787,17 +890,14 @@ class Renderer:
             if not st.tex_rows:
                 break
             maps_args = (st.s_rows, st.s_cols, st.s_widths, st.s_offsets)
-            _atlas_maps(maps[0].reshape(-1), maps[1].reshape(-1), *maps_args, st.s_codes,
-                        layout.coord_a, layout.coord_b, layout.wall_row, layout.piece_table,
-                        layout.levels, layout.wall_y, affine, size_x, size_y, wall_shift,
-                        float(scene.wall_size[0]))
+            _sample_atlas(tex, scene.atlas, *maps_args, st.s_codes, layout.coord_a,
+                          layout.coord_b, layout.wall_row, layout.piece_table, layout.levels,
+                          layout.wall_y, affine, size_x, size_y, wall_shift,
+                          float(scene.wall_size[0]))
             if with_light and k == 0:
                 _light_maps(light_maps[0].reshape(-1), light_maps[1].reshape(-1), *maps_args,
                             layout.coord_a, layout.coord_b, affine, size_x, size_y,
                             scene.resolution_m / LIGHT_RES_M)
-            cv2.remap(scene.atlas, maps[0], maps[1], cv2.INTER_LINEAR,
-                      dst=tex[:n_tex].reshape(st.tex_rows, _PACK),
-                      borderMode=cv2.BORDER_CONSTANT, borderValue=0)
             if blur:
                 total += tex
             if with_light and k == 0:

@@ -325,3 +325,74 @@ def test_combine_per_piece_equals_the_per_pixel_blend() -> None:
     got = out.reshape(rows, width)[np.argsort(order)]
     assert (got == want).all()
     assert (got == 255).any() and (got == 0).any()  # both clips are exercised
+
+
+def _fma_sensitive_samples(rng: np.random.Generator, want: int
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Taps (4, n) and fractions of samples whose bilinear value rounds differently with
+    fused and with separate multiply-adds (about one in a million)."""
+    f32 = np.float32
+
+    def lerp(p: np.ndarray, sx: np.ndarray, sy: np.ndarray, fused: bool) -> np.ndarray:
+        def mad(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+            return (a.astype(np.float64) * b + c).astype(f32) if fused else a * b + c
+        v0, v1 = mad(sx, p[1] - p[0], p[0]), mad(sx, p[3] - p[2], p[2])
+        return np.rint(mad(sy, v1 - v0, v0))
+
+    taps, fx, fy = [], [], []
+    while sum(map(len, fx)) < want:
+        p = rng.integers(0, 256, (4, 1 << 21)).astype(f32)
+        sx = (rng.integers(0, 4096, 1 << 21) / 4096).astype(f32)  # exact beside x < 2048
+        sy = rng.random(1 << 21).astype(f32)
+        hit = lerp(p, sx, sy, True) != lerp(p, sx, sy, False)
+        taps.append(p[:, hit])
+        fx.append(sx[hit])
+        fy.append(sy[hit])
+    return np.concatenate(taps, axis=1), np.concatenate(fx), np.concatenate(fy)
+
+
+def test_atlas_sampling_equals_opencv_remap() -> None:
+    """The renderer samples the atlas itself (``_bilinear``); it must give what
+    ``cv2.remap`` (bilinear, constant 0 border, float maps in rows of 1024, as the
+    renderer called it) gives: inside, across every border, far outside (the padding
+    coordinate), at exact texels, and where only fused multiply-adds round right."""
+    import cv2
+
+    from tfalda_sim.rendering.renderer import _bilinear
+
+    rng = np.random.default_rng(11)
+    f32 = np.float32
+    rows, width = 24, 1024
+    image = rng.integers(0, 256, (61, 83), dtype=np.uint8)
+    mx = rng.uniform(-3.0, 86.0, (rows, width)).astype(f32)
+    my = rng.uniform(-3.0, 64.0, (rows, width)).astype(f32)
+    mx[:4] = np.round(mx[:4] * 2) / 2  # texel centres and halfway points
+    my[:4] = np.round(my[:4] * 2) / 2
+    mx[4, ::3] = -8.0  # the renderer's padding coordinate
+    cases: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = [
+        (image, mx, my, cv2.remap(image, mx, my, cv2.INTER_LINEAR,
+                                  borderMode=cv2.BORDER_CONSTANT, borderValue=0))]
+    # Samples that tell fused from separate multiply-adds, one 2×2 block each.
+    taps, fx, fy = _fma_sensitive_samples(rng, 40)
+    n = taps.shape[1]
+    blocks = np.zeros((2, 2 * width), np.uint8)
+    sx = np.full((1, width), 0.25, f32)
+    sy = np.full((1, width), 0.25, f32)
+    for k in range(n):
+        col = 7 * k  # spread over the row
+        blocks[:, 2 * col:2 * col + 2] = taps[:, k].reshape(2, 2)
+        sx[0, col] = f32(2 * col) + fx[k]
+        sy[0, col] = fy[k]
+    want = cv2.remap(blocks, sx, sy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                     borderValue=0)
+    cases.append((blocks, sx, sy, want))
+    for img, xs, ys, expected in cases:
+        h, w = img.shape
+        got = np.empty(xs.shape, np.uint8)
+        scratch = (np.empty(width, f32), np.empty(width, f32), np.empty(width, np.int32),
+                   np.empty(width, np.uint16), np.empty(width, np.uint16))
+        for r in range(xs.shape[0]):
+            _bilinear(got[r], img.reshape(-1), np.int32(h), np.int32(w), xs[r], ys[r],
+                      *scratch)
+        assert (got == expected).all(), f"{np.count_nonzero(got != expected)} samples differ"
+    assert n >= 40
