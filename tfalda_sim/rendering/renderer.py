@@ -121,7 +121,7 @@ def _bilinear(out: np.ndarray, flat: np.ndarray, h: np.int32, w: np.int32, mx: n
               top: np.ndarray, bottom: np.ndarray) -> None:
     """``out[j]`` = the ``h`` × ``w`` image ``flat`` (uint8, row-major) at ``(mx[j],
     my[j])`` [texels, centres at integers], bilinear, taps outside reading 0: what
-    ``cv2.remap(INTER_LINEAR, BORDER_CONSTANT, 0)`` of OpenCV ≥ 4.11 computes for a uint8
+    ``cv2.remap(INTER_LINEAR, BORDER_CONSTANT, 0)`` of OpenCV 5 (5.0, 5.1) computes for a uint8
     image and float maps (float32 weights, fused multiply-adds, rounded half to even),
     the renderer's sampler before (``tests`` compare the two). Three loops, so that the
     arithmetic ones vectorise and only the loads (two 16-bit pairs per sample) stay

@@ -360,6 +360,9 @@ def test_atlas_sampling_equals_opencv_remap() -> None:
 
     from tfalda_sim.rendering.renderer import _bilinear
 
+    if int(cv2.__version__.split(".")[0]) < 5:
+        pytest.skip(f"OpenCV {cv2.__version__}'s remap uses fixed-point weights (OpenCV 5 "
+                    "float32 ones, which the renderer reproduces)")
     rng = np.random.default_rng(11)
     f32 = np.float32
     rows, width = 24, 1024
