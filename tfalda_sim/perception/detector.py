@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .candidates import choose_lane, preprocess, sobel_horizontal_edges
+from .candidates import find_lane, resample, sobel_horizontal_edges
 from .lis import LaneInferenceSystem, LisResult, Rows
-from .params import DetectorConfig
+from .params import DetectorConfig, EdgeMode
 from .rois import (
     LaneChangeState,
     Roi,
@@ -220,15 +220,16 @@ class TfaldaDetector:
         horizontal = (tcfg.sobel_manager and prev is not None
                       and sobel_horizontal_edges(prev.d, prev.y_bottom - prev.y_top,
                                                  tcfg.sobel_switch_angle_deg))
-        grad = preprocess(crop, tcfg, horizontal)
+        small = resample(crop, tcfg)
         # Back to image coordinates (listing A.6 normalize_vector: × resample factor + ROI
         # offset), pixel centre to pixel centre and with the crop's exact factor [px]; the
         # first frame takes the largest I, later ones the smallest λ (first of equals).
         kp, kd = tcfg.kp, tcfg.kd
         if lambda_scale != 1.0:
             kp, kd = kp / lambda_scale, kd / lambda_scale
-        p, d, i, lam = choose_lane(
-            grad, float(roi.x), roi.width / grad.shape[1], prev is None,
+        p, d, i, lam = find_lane(
+            small, horizontal, tcfg.edge_mode is EdgeMode.RISING, float(roi.x),
+            roi.width / small.shape[1], prev is None,
             *((prev.p, prev.d, prev.i) if prev is not None else (0.0, 0.0, 0.0)),
             kp, kd, tcfg.ki)
         return LaneSegment(p, d, i, float(roi.y), float(roi.y + height), lam)

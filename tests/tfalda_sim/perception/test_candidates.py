@@ -135,3 +135,33 @@ def test_choose_lane_equals_candidates_lambda_and_argmin(seed: int) -> None:
         want = (float(p_img[k]), float(d_img[k]), float(i[k]), lam)
         assert got[:3] == want[:3]
         assert got[3] == want[3] or (np.isnan(got[3]) and np.isnan(want[3]))
+
+
+@pytest.mark.parametrize("seed", range(24))
+def test_detector_sobel_equals_opencv_and_its_lane_the_reference(seed: int) -> None:
+    """The detector's per-ROI kernel (``find_lane``: Sobel in numba, then the search) gives
+    OpenCV's Sobel of the resampled crop (``preprocess``) bit for bit, in both directions
+    and edge modes, down to 1 px wide images, and so the lane ``choose_lane`` picks."""
+    from tfalda_sim.perception.candidates import find_lane, resample, sobel_into
+
+    rng = np.random.default_rng(seed)
+    h, w = int(rng.integers(2, 40)), int(rng.integers(1, 90))
+    if seed < 3:
+        w = seed + 1  # the narrowest crops: reflected borders meet
+    crop = rng.integers(0, 256, (2 * h, 2 * w), dtype=np.uint8)
+    if seed % 2:
+        crop[:, rng.integers(0, 2 * w):] //= 8  # an edge
+    for mode in EdgeMode:
+        config = TfaldaConfig(edge_mode=mode)
+        small = resample(crop, config)
+        for horizontal in (False, True):
+            want = preprocess(crop, config, horizontal)
+            flat = np.full(small.size + 4, -1, np.int32)
+            sobel_into(small, horizontal, mode is EdgeMode.RISING, flat)
+            assert (flat[:small.size].reshape(small.shape) == want).all()
+            assert (flat[small.size:] == -1).all()
+            args = (float(rng.integers(0, 600)), 2 * w / small.shape[1], bool(seed % 3),
+                    300.0, 10.0, 800.0, 1.0, 2.0, 0.01)
+            np.testing.assert_equal(  # exact, NaN (first frame's λ) equal to NaN
+                find_lane(small, horizontal, mode is EdgeMode.RISING, *args),
+                choose_lane(want, *args))
