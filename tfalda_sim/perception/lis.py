@@ -91,16 +91,19 @@ class LaneInferenceSystem:
         # Looked up here once: hashing the (frozen, uncached) config for the cache four
         # times a frame cost more than the interpolation.
         self._limits = _limit_table(config)
+        self._row_limits: dict[tuple[float, float], tuple[float, float, float, float]] = {}
         self.fault_count = 0
 
     def __getstate__(self) -> dict[str, object]:
         state = self.__dict__.copy()
         del state["_limits"]  # derived from the config: pickles stay as they were
+        state.pop("_row_limits", None)
         return state
 
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__dict__.update(state)
         self._limits = _limit_table(self.config)
+        self._row_limits = {}
 
     def start(self, rows: Rows) -> None:
         """Initialise the filter with a first frame's widths (listing A.4 ``init``)."""
@@ -129,13 +132,9 @@ class LaneInferenceSystem:
                          alpha * measured[1] + (1.0 - alpha) * last[1]) if cfg.lowpass
                         else measured)
             ok = True
-            if cfg.min_max:  # ``width_limits`` at both edges: np.interp, elementwise
-                ys = (left.y_top, left.y_bottom)
-                table_rows, table_lo, table_hi = self._limits
-                los = np.interp(ys, table_rows, table_lo)
-                his = np.interp(ys, table_rows, table_hi)
-                ok = (float(los[0]) <= measured[0] <= float(his[0])
-                      and float(los[1]) <= measured[1] <= float(his[1]))
+            if cfg.min_max:  # ``width_limits`` at both edges
+                lo0, lo1, hi0, hi1 = self._limits_at(left.y_top, left.y_bottom)
+                ok = lo0 <= measured[0] <= hi0 and lo1 <= measured[1] <= hi1
             if ok and cfg.width_change:
                 seen = filtered if cfg.width_check is WidthCheck.FILTERED else measured
                 tol = cfg.width_tolerance_px
@@ -156,6 +155,22 @@ class LaneInferenceSystem:
         roi_reset_due = cfg.roi_reset and self.fault_count > cfg.fault_limit
         return LisResult(out, replaced, corrected, new_widths.copy(), self.fault_count,
                          roi_reset_due)
+
+    def _limits_at(self, y_top: float, y_bottom: float) -> tuple[float, float, float, float]:
+        """``width_limits`` (min, min, max, max) at a row's top and bottom edge [px]: np.interp
+        of the table, remembered per row (the ROI rows keep their heights, and two
+        interpolations per row and frame cost more than the rest of the check)."""
+        key = (y_top, y_bottom)
+        found = self._row_limits.get(key)
+        if found is None:
+            table_rows, table_lo, table_hi = self._limits
+            los = np.interp(key, table_rows, table_lo)
+            his = np.interp(key, table_rows, table_hi)
+            if len(self._row_limits) >= 64:  # bounded, whatever the ROIs do
+                self._row_limits.clear()
+            found = self._row_limits[key] = (float(los[0]), float(los[1]), float(his[0]),
+                                             float(his[1]))
+        return found
 
     def _vertical(self, upper: tuple[LaneSegment, LaneSegment],
                   lower: tuple[LaneSegment, LaneSegment]
