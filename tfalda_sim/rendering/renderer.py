@@ -128,17 +128,15 @@ def _bilinear(out: np.ndarray, flat: np.ndarray, h: np.int32, w: np.int32, mx: n
     scalar: scratch of at least ``len(mx)`` float32 ``frac_x``, ``frac_y``, int32 ``at``,
     uint16 ``top``, ``bottom``."""
     n = len(mx)
+    last_x = np.float32(w - 1)  # exact: the atlas has < 2^24 texels a side
+    last_y = np.float32(h - 1)
     for j in range(n):
-        x = mx[j]
-        y = my[j]
-        ix = np.int32(x)
-        ix -= np.int32(np.float32(ix) > x)  # floor (x may be negative: padding)
-        iy = np.int32(y)
-        iy -= np.int32(np.float32(iy) > y)
-        frac_x[j] = x - np.float32(ix)
-        frac_y[j] = y - np.float32(iy)
-        inside = (ix >= 0) & (ix < w - 1) & (iy >= 0) & (iy < h - 1)
-        at[j] = iy * w + ix if inside else np.int32(-1)
+        fx = np.floor(mx[j])  # x may be negative (padding)
+        fy = np.floor(my[j])
+        frac_x[j] = mx[j] - fx
+        frac_y[j] = my[j] - fy
+        inside = (fx >= 0) & (fx < last_x) & (fy >= 0) & (fy < last_y)
+        at[j] = np.int32(fy) * w + np.int32(fx) if inside else np.int32(-1)
     for j in range(n):
         k = at[j]
         if k >= 0:
@@ -148,11 +146,13 @@ def _bilinear(out: np.ndarray, flat: np.ndarray, h: np.int32, w: np.int32, mx: n
             top[j], bottom[j] = _taps_at_border(flat, h, w, int(math.floor(mx[j])),
                                                 int(math.floor(my[j])))
     magic = np.float32(1 << 23)  # x + 2^23 − 2^23 rounds 0 ≤ x < 2^22 half to even
+    top8 = top.view(np.uint8)  # the pairs' bytes: left tap, right tap (little-endian)
+    bottom8 = bottom.view(np.uint8)
     for j in range(n):
-        p00 = np.float32(top[j] & 255)
-        p01 = np.float32(top[j] >> 8)
-        p10 = np.float32(bottom[j] & 255)
-        p11 = np.float32(bottom[j] >> 8)
+        p00 = np.float32(top8[2 * j])
+        p01 = np.float32(top8[2 * j + 1])
+        p10 = np.float32(bottom8[2 * j])
+        p11 = np.float32(bottom8[2 * j + 1])
         v0 = _fma32(frac_x[j], p01 - p00, p00)
         v1 = _fma32(frac_x[j], p11 - p10, p10)
         v = _fma32(frac_y[j], v1 - v0, v0)  # in [0, 255]
