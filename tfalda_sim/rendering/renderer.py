@@ -299,27 +299,27 @@ def _combine(out: np.ndarray, out_offsets: np.ndarray, rows: np.ndarray, cols: n
                     v = bonnet_dn + refl * (mat + k_line * np.float32(tx[j])
                                             + np.float32(sh[j]))
                     v = v * ga[j] + sigma * np.float32(nz[j])
-                    o[j] = np.uint8(min(max(v, zero), top) + half)
+                    o[j] = np.uint8(np.int32(min(max(v, zero), top) + half))
             else:
                 for j in range(width):
                     v = mat + k_line * np.float32(tx[j]) + np.float32(sh[j])
                     v = v * ga[j] + sigma * np.float32(nz[j])
-                    o[j] = np.uint8(min(max(v, zero), top) + half)
+                    o[j] = np.uint8(np.int32(min(max(v, zero), top) + half))
         elif f & 4:
             base = bonnet_dn + refl * ceiling if f & 2 else ceiling
             for j in range(width):
                 v = base * ga[j] + sigma * np.float32(nz[j])
-                o[j] = np.uint8(min(max(v, zero), top) + half)
+                o[j] = np.uint8(np.int32(min(max(v, zero), top) + half))
         elif f & 2:
             for j in range(width):
                 v = bonnet_dn + refl * (wall_k * np.float32(tx[j]))
                 v = v * ga[j] + sigma * np.float32(nz[j])
-                o[j] = np.uint8(min(max(v, zero), top) + half)
+                o[j] = np.uint8(np.int32(min(max(v, zero), top) + half))
         else:
             for j in range(width):
                 v = wall_k * np.float32(tx[j])
                 v = v * ga[j] + sigma * np.float32(nz[j])
-                o[j] = np.uint8(min(max(v, zero), top) + half)
+                o[j] = np.uint8(np.int32(min(max(v, zero), top) + half))
 
 
 @njit(cache=True, error_model="numpy")
@@ -644,7 +644,7 @@ def _segments(switch: np.ndarray, code: np.ndarray, flags: np.ndarray, reads: np
     and c) holds, padded with the width; and per segment between them (segment i ends at
     cut i) the ``code``, ``flags`` and ``reads`` of its first pixel."""
     h, w = code.shape
-    cuts = np.full((h, max(1, int(switch.sum(axis=1).max()))), w, np.int64)
+    cuts = np.full((h, max(1, int(switch.sum(axis=1).max()))), w, np.int16)  # cache-small
     seg_code = np.zeros((h, cuts.shape[1] + 1), np.uint8)
     seg_flags = np.zeros((h, cuts.shape[1] + 1), np.uint8)
     seg_reads = np.zeros((h, cuts.shape[1] + 1), np.bool_)
