@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Generic, TypeVar
 
-from .interrupts import INTERRUPTS, ignoring_stops, is_interrupt, last_stop_signal
+from .interrupts import INTERRUPTS, deferring_stops, ignoring_stops, is_interrupt, last_stop_signal
 from .outputs import DIRECTORY, Output, OutputError, journal_of
 from .outputs import check_outputs as _check_outputs
 from .parallel import BACKENDS, Backend, RayUnavailable, WorkerDied, import_ray, resolve_workers
@@ -538,6 +538,10 @@ def run_sweep(spec: SweepSpec[J], backend: Backend[Any, Any],
                                         disable=not progress))
 
         def keep(item: tuple[J, str, dict[str, Any], Any, int]) -> None:
+            with deferring_stops():  # a Ctrl-C keeps this result whole in every output
+                _keep(item)
+
+        def _keep(item: tuple[J, str, dict[str, Any], Any, int]) -> None:
             job, line, rec, result, n = item
             try:
                 handle(rec)

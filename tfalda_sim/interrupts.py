@@ -5,6 +5,7 @@ Inside ``stop_signals_interrupt()`` SIGTERM (``timeout``, a CI cancel, ``kill``)
 interrupt path — keep what was finished, say what, exit ``128 + signal`` — serves all
 three. ``ignoring_stops()`` shields the few seconds in which a command saves what it
 finished: a second Ctrl-C there would otherwise throw away the first one's results.
+``deferring_stops()`` holds a stop back while one finished result goes to its outputs.
 """
 
 from __future__ import annotations
@@ -76,6 +77,38 @@ def ignoring_stops() -> Iterator[None]:
     finally:
         for sig, handler in saved.items():
             signal.signal(sig, handler)
+
+
+@contextlib.contextmanager
+def deferring_stops() -> Iterator[None]:
+    """Hold back the stop signals inside the block, then act on the first one that came
+    (the handler in force before the block: a Ctrl-C raises KeyboardInterrupt after it):
+    for the few milliseconds in which one finished result goes to all of its outputs, so
+    that a Ctrl-C keeps it whole or not at all, and is never lost. A no-op outside the
+    main thread."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    saved = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    held: list[int] = []
+
+    def hold(signum: int, frame: FrameType | None) -> None:
+        held.append(signum)
+
+    for sig, handler in saved.items():
+        if handler is not signal.SIG_IGN:
+            signal.signal(sig, hold)
+    try:
+        yield
+    finally:
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
+    if held:
+        handler = saved[signal.Signals(held[0])]
+        if callable(handler):
+            handler(held[0], None)
+        elif handler == signal.SIG_DFL:
+            signal.raise_signal(held[0])
 
 
 INTERRUPTS = (KeyboardInterrupt, SystemError)

@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import os
 import signal
+from pathlib import Path
 
 import pytest
 
 from tfalda_sim.cli_common import consume
 from tfalda_sim.interrupts import (
+    deferring_stops,
     ignoring_stops,
     is_interrupt,
     last_stop_signal,
@@ -61,3 +63,46 @@ def test_sigterm_raises_the_interrupt_inside_and_not_outside() -> None:
             _spin()
     assert signal.getsignal(signal.SIGTERM) == before  # restored after the command
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_deferred_stop_acts_after_the_block_and_is_not_lost() -> None:
+    with stop_signals_interrupt():
+        done = []
+        with pytest.raises(KeyboardInterrupt):
+            with deferring_stops():
+                os.kill(os.getpid(), signal.SIGTERM)
+                _spin()
+                done.append("rest of the block")  # not cut short
+        assert done == ["rest of the block"] and last_stop_signal() == signal.SIGTERM
+        with deferring_stops():  # nothing came: nothing happens
+            _spin()
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_ctrl_c_while_a_sweep_writes_a_result_keeps_that_result_whole(
+        tmp_path: Path) -> None:
+    """A Ctrl-C landing between two lines of one result's side output (a track's frames
+    in ``evaluate --jsonl``) stops the sweep after that result, with all its lines and
+    its journal record, not in the middle of them."""
+    from tfalda_sim.cli_common import SweepSpec, run_sweep
+    from tfalda_sim.parallel import Backend
+
+    spec = SweepSpec(command="demo", config={"seeds": "0:5"}, jobs=range(5), total=5,
+                     fn=abs, record=lambda j, r: {"x": j}, check=lambda j, r: None)
+    frames = tmp_path / "frames.txt"
+    journal = tmp_path / "r.jsonl"
+    with stop_signals_interrupt(), open(frames, "w") as fh:
+        def write_frames(job: int, result: int) -> None:
+            fh.write(f"{job} a\n")
+            if job == 1:
+                os.kill(os.getpid(), signal.SIGINT)
+                _spin()
+            fh.write(f"{job} b\n")
+
+        seen: list[dict[str, int]] = []
+        end = run_sweep(spec, Backend("local", 1), seen.append, results=journal,
+                        progress=False, on_result=write_frames)
+    assert end.interrupted
+    assert seen == [{"x": 0}, {"x": 1}]
+    assert frames.read_text() == "0 a\n0 b\n1 a\n1 b\n"
+    assert journal.read_text().splitlines()[1:] == ['{"x": 0}', '{"x": 1}']
