@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import sys
 from dataclasses import dataclass
 
 import cv2
@@ -80,10 +81,15 @@ def _fma32(typingctx, a, b, c):  # type: ignore[no-untyped-def]  # numba's signa
     return types.float32(types.float32, types.float32, types.float32), codegen
 
 
+_LITTLE_ENDIAN = sys.byteorder == "little"
+"""A compile-time constant of the kernels: the byte order of a 16-bit value."""
+
+
 @intrinsic
 def _load_pair(typingctx, flat, k):  # type: ignore[no-untyped-def]  # numba's signature
-    """``flat[k] | flat[k + 1] << 8`` (uint8 array, in bounds) as one unaligned 16-bit
-    load: the two horizontal taps of a bilinear sample (x86 and ARM are little-endian)."""
+    """``flat[k]`` and ``flat[k + 1]`` (uint8 array, in bounds) in one unaligned 16-bit
+    load: the two horizontal taps of a bilinear sample. Stored to a uint16 array, its
+    bytes are those two in that order, whatever the byte order."""
     if not (isinstance(flat, types.Array) and flat.dtype == types.uint8
             and isinstance(k, types.Integer)):
         return None
@@ -100,6 +106,7 @@ def _load_pair(typingctx, flat, k):  # type: ignore[no-untyped-def]  # numba's s
 def _taps_at_border(flat: np.ndarray, h: int, w: int, ix: int, iy: int) -> tuple[int, int]:
     """``_load_pair`` of rows ``iy`` and ``iy + 1`` at column ``ix`` for a sample that is
     not inside the atlas: taps outside read 0."""
+    shift = 8 if _LITTLE_ENDIAN else 0  # of the right tap: its byte comes second
     a = 0
     b = 0
     for dy in range(2):
@@ -107,7 +114,7 @@ def _taps_at_border(flat: np.ndarray, h: int, w: int, ix: int, iy: int) -> tuple
         for dx in range(2):
             x = ix + dx
             if 0 <= x < w and 0 <= y < h:
-                v = np.int64(flat[y * w + x]) << (8 * dx)
+                v = np.int64(flat[y * w + x]) << (shift if dx else 8 - shift)
                 if dy == 0:
                     a |= v
                 else:
@@ -146,7 +153,7 @@ def _bilinear(out: np.ndarray, flat: np.ndarray, h: np.int32, w: np.int32, mx: n
             top[j], bottom[j] = _taps_at_border(flat, h, w, int(math.floor(mx[j])),
                                                 int(math.floor(my[j])))
     magic = np.float32(1 << 23)  # x + 2^23 − 2^23 rounds 0 ≤ x < 2^22 half to even
-    top8 = top.view(np.uint8)  # the pairs' bytes: left tap, right tap (little-endian)
+    top8 = top.view(np.uint8)  # per sample its taps' bytes: left, right
     bottom8 = bottom.view(np.uint8)
     for j in range(n):
         p00 = np.float32(top8[2 * j])
