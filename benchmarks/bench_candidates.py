@@ -5,9 +5,11 @@
 The ROIs of rendered frames (the thesis' four, along the right lane of the oval and two
 generated tracks) are pre-processed as the detector does (resample, Sobel); then both
 kernels search the same gradient images: the current ``search_candidates`` (row additions
-padded to whole SIMD blocks) and the previous one (issue 4's, kept below as the same-run
-reference: unpadded rows whose rests ran as scalar code). Both must give the same
-candidates. Reported: µs per ROI, the ratio old/new, and the work against one core's SIMD:
+padded to whole SIMD blocks) on int32 images, the same on uint16 images (what the detector
+runs when every sum fits 16 bits, as for the thesis' ROIs: twice the lanes per vector) and
+the previous one (issue 4's, kept below as the same-run reference: unpadded rows whose
+rests ran as scalar code). All must give the same candidates. Reported: µs per ROI, the
+ratios old/new, and the work against one core's SIMD:
 the useful int32 additions ``Σ n·m`` (n samples of m starts per end offset), the ones
 executed with padding, and the additions per ns that makes.
 """
@@ -24,7 +26,12 @@ from _machine import machine, pin_to_one_core
 from numba import njit
 
 from tfalda_sim.perception import DetectorConfig
-from tfalda_sim.perception.candidates import SIMD_BLOCK, preprocess, search_candidates
+from tfalda_sim.perception.candidates import (
+    SIMD_BLOCK,
+    UINT16_MAX_SAMPLES,
+    preprocess,
+    search_candidates,
+)
 from tfalda_sim.perception.rois import initial_rois, windows
 from tfalda_sim.rendering import Effects, Renderer, build_scene
 from tfalda_sim.tracks import generate, load_named
@@ -105,16 +112,24 @@ def gradients(n: int) -> list[np.ndarray]:
 def run(n: int, repeat: int) -> dict[str, object]:
     pin_to_one_core()
     grads = gradients(n)
-    inputs = []  # (flat padded int32 image, height, width, best_i, best_end)
-    for g in grads:
-        h, w = g.shape
-        flat = np.zeros(h * w + SIMD_BLOCK, np.int32)
-        flat[:h * w] = g.ravel()
-        inputs.append((flat, h, w, np.empty(w, np.int32), np.empty(w, np.int32)))
-    scratch = np.empty(max(w for _, _, w, _, _ in inputs) + SIMD_BLOCK, np.int32)
+    def padded(dtype: type) -> list[tuple[np.ndarray, int, int, np.ndarray, np.ndarray]]:
+        """(flat padded image of ``dtype``, height, width, best_i, best_end) per ROI."""
+        out = []
+        for g in grads:
+            h, w = g.shape
+            flat = np.zeros(h * w + SIMD_BLOCK, dtype)
+            flat[:h * w] = g.ravel()
+            out.append((flat, h, w, np.empty(w, np.int32), np.empty(w, np.int32)))
+        return out
 
-    def time_kernel(kernel) -> tuple[float, list[tuple[np.ndarray, np.ndarray]]]:
+    inputs = padded(np.int32)
+    inputs16 = padded(np.uint16)
+    assert max(max(h, w) for _, h, w, _, _ in inputs16) <= UINT16_MAX_SAMPLES
+
+    def time_kernel(kernel, inputs=inputs, dtype=np.int32
+                    ) -> tuple[float, list[tuple[np.ndarray, np.ndarray]]]:
         """Best time per ROI over ``repeat`` passes, and the results."""
+        scratch = np.empty(max(w for _, _, w, _, _ in inputs) + SIMD_BLOCK, dtype)
         for flat, h, w, bi, be in inputs:  # warm-up (JIT)
             kernel(flat, h, w, bi, be, scratch)
         best = np.inf
@@ -127,8 +142,9 @@ def run(n: int, repeat: int) -> dict[str, object]:
 
     t_old, r_old = time_kernel(previous_search_candidates)
     t_new, r_new = time_kernel(search_candidates)
+    t_16, r_16 = time_kernel(search_candidates, inputs16, np.uint16)
     same = all(np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
-               for a, b in zip(r_new, r_old, strict=True))
+               for new in (r_new, r_16) for a, b in zip(new, r_old, strict=True))
     useful = sum(additions(h, w)[0] for _, h, w, _, _ in inputs) / len(inputs)
     executed = sum(additions(h, w)[1] for _, h, w, _, _ in inputs) / len(inputs)
     sizes = sorted({(h, w) for _, h, w, _, _ in inputs})
@@ -136,10 +152,12 @@ def run(n: int, repeat: int) -> dict[str, object]:
             "roi_sizes_resampled": [list(s) for s in sizes],
             "identical_results": same,
             "previous_us_per_roi": t_old * 1e6, "current_us_per_roi": t_new * 1e6,
-            "speed_up": t_old / t_new,
+            "current_uint16_us_per_roi": t_16 * 1e6,
+            "speed_up": t_old / t_new, "speed_up_uint16": t_old / t_16,
             "useful_additions_per_roi": useful, "executed_additions_per_roi": executed,
             "useful_additions_per_ns_previous": useful / (t_old * 1e9),
             "useful_additions_per_ns_current": useful / (t_new * 1e9),
+            "useful_additions_per_ns_uint16": useful / (t_16 * 1e9),
             "executed_additions_per_ns_current": executed / (t_new * 1e9)}
 
 
@@ -163,7 +181,10 @@ def main(argv: list[str] | None = None) -> int:
           f"{r['useful_additions_per_ns_previous']:>9.2f}")
     print(f"{'current (padded SIMD blocks)':<34}{r['current_us_per_roi']:>9.1f}"
           f"{r['useful_additions_per_ns_current']:>9.2f}")
-    print(f"speed-up {r['speed_up']:.2f}×, results identical: {r['identical_results']}")
+    print(f"{'current, uint16 (the detector)':<34}{r['current_uint16_us_per_roi']:>9.1f}"
+          f"{r['useful_additions_per_ns_uint16']:>9.2f}")
+    print(f"speed-up {r['speed_up']:.2f}× (uint16 {r['speed_up_uint16']:.2f}×), results "
+          f"identical: {r['identical_results']}")
     print(f"additions per ROI: {r['useful_additions_per_roi']:.0f} useful, "
           f"{r['executed_additions_per_roi']:.0f} executed with padding "
           f"({r['executed_additions_per_ns_current']:.2f} per ns)")

@@ -63,6 +63,40 @@ def test_kernel_equals_the_plain_reference(seed: int) -> None:
     assert p.tolist() == rp
     assert d.tolist() == rd, (h, w, kind)
     assert i.tolist() == ri
+    # The 16-bit variant (images whose sums fit: the detector's) is the same kernel.
+    assert _search(img, np.uint16) == (rd, ri)
+
+
+def _search(img: np.ndarray, dtype: type) -> tuple[list[int], list[int]]:
+    """``search_candidates`` on ``img`` held as ``dtype``: (D, I) per start x."""
+    from tfalda_sim.perception.candidates import SIMD_BLOCK, search_candidates
+
+    h, w = img.shape
+    flat = np.zeros(h * w + SIMD_BLOCK, dtype)
+    flat[:h * w] = img.ravel()
+    best_i, best_end = np.empty(w, np.int32), np.empty(w, np.int32)
+    search_candidates(flat, h, w, best_i, best_end, np.empty(w + SIMD_BLOCK, dtype))
+    return (best_end - np.arange(w)).tolist(), best_i.tolist()
+
+
+def test_the_16_bit_search_holds_the_largest_sums_it_is_used_for() -> None:
+    """An all-white image as wide as the 16-bit search goes: its longest segments sum to
+    65535 exactly, as the 32-bit search finds; one pixel wider, the detector's kernel
+    switches to 32 bits and still equals the reference path."""
+    from tfalda_sim.perception.candidates import UINT16_MAX_SAMPLES, find_lane
+
+    white = np.full((2, UINT16_MAX_SAMPLES), 255, np.uint8)
+    d16, i16 = _search(white, np.uint16)
+    assert (d16, i16) == _search(white, np.int32) and max(i16) == 65535
+    # Columns 0 0 255 255 …: |∂/∂x| saturates at 255 but in the first and last column, so
+    # the longest segments inside a 260 px wide gradient sum past 16 bits.
+    pattern = np.repeat(np.array([0, 255], np.uint8), 2)
+    wider = np.tile(pattern, (3, 66))[:, :UINT16_MAX_SAMPLES + 3]
+    gradient = preprocess(wider, TfaldaConfig(resample_factor=1.0, edge_mode=EdgeMode.BOTH),
+                          False)
+    assert _search(gradient, np.uint16) != _search(gradient, np.int32)  # 16 bits overflow
+    args = (0.0, 1.0, True, 0.0, 0.0, 0.0, 1.0, 1.0, 0.01)
+    np.testing.assert_equal(find_lane(wider, False, False, *args), choose_lane(gradient, *args))
 
 
 def test_all_dark_candidates_keep_the_listing_end_x_0() -> None:
