@@ -15,7 +15,9 @@ road every ≈ 50 steps, so a reset's cost counts):
   "lanes" mode on default generated tracks; steps are env steps (N per vector step).
 
 Single envs run pinned to one core with OpenCV on one thread (figures per core); the vector
-envs get every core of the machine. Needs Box2D for the reference
+envs get every core of the machine. A mode's fixed-track and generated-track envs run
+interleaved, in chunks of ``CHUNK_STEPS`` steps each in turn, so that the host's drift
+(± 10 % between runs a minute apart here) does not enter their ratio. Needs Box2D for the reference
 (``pip install "gymnasium[box2d]"``, in the ``dev`` extra).
 """
 
@@ -61,6 +63,45 @@ def steps_per_second(env: gym.Env, steps: int, desc: str, quiet: bool) -> dict[s
             "episodes": resets + 1}
 
 
+CHUNK_STEPS = 300
+"""Steps per turn when single envs run interleaved (``interleaved_steps_per_second``)."""
+
+
+def interleaved_steps_per_second(makes: dict[str, Callable[[], gym.Env]], steps: int,
+                                 quiet: bool) -> dict[str, dict[str, float]]:
+    """``steps_per_second`` of several envs at once: each warmed up as there, then all
+    stepped in turns of ``CHUNK_STEPS`` steps until each has made ``steps``; an env's time
+    is the sum of its turns."""
+    envs = {name: make() for name, make in makes.items()}
+    clock = dict.fromkeys(envs, 0.0)
+    resets = dict.fromkeys(envs, 0)
+    try:
+        for env in envs.values():
+            env.action_space.seed(0)
+            env.reset(seed=0)
+            for _ in range(WARMUP_STEPS):
+                env.step(env.action_space.sample())
+            env.reset(seed=1)
+        with tqdm(total=steps * len(envs), desc=" + ".join(envs), disable=quiet,
+                  file=sys.stderr) as bar:
+            for start in range(0, steps, CHUNK_STEPS):
+                n = min(CHUNK_STEPS, steps - start)
+                for name, env in envs.items():
+                    t0 = time.perf_counter()
+                    for _ in range(n):
+                        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+                        if terminated or truncated:
+                            env.reset()
+                            resets[name] += 1
+                    clock[name] += time.perf_counter() - t0
+                    bar.update(n)
+    finally:
+        for env in envs.values():
+            env.close()
+    return {name: {"steps_per_s": steps / clock[name], "ms_per_step": 1000 * clock[name] / steps,
+                   "episodes": resets[name] + 1} for name in envs}
+
+
 def vector_steps_per_second(make: Callable[[], gym.vector.VectorEnv], steps: int, desc: str,
                             quiet: bool) -> dict[str, float]:
     """Env steps/s of a vector env (autoreset inside) over about ``steps`` env steps."""
@@ -88,23 +129,24 @@ def run(steps: int, quiet: bool) -> dict[str, Any]:
     all_cpus = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
     results: dict[str, dict[str, float] | str] = {}
 
-    def single(name: str, make: Callable[[], gym.Env], n: int) -> None:
-        if all_cpus is not None:  # per-core figures
+    def one_core() -> None:  # per-core figures
+        if all_cpus is not None:
             os.sched_setaffinity(0, {min(all_cpus)})
         cv2.setNumThreads(1)
-        try:
-            results[name] = steps_per_second(make(), n, name, quiet)
-        except Exception as exc:  # the reference may be missing: say so in the table
-            results[name] = f"not available: {type(exc).__name__}: {exc}"
 
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")  # CarRacing draws with pygame
-    single(REFERENCE, lambda: gym.make("CarRacing-v3"), min(steps, 2000))
+    one_core()
+    try:
+        results[REFERENCE] = steps_per_second(gym.make("CarRacing-v3"), min(steps, 2000),
+                                              REFERENCE, quiet)
+    except Exception as exc:  # the reference may be missing: say so in the table
+        results[REFERENCE] = f"not available: {type(exc).__name__}: {exc}"
     for mode in ("lanes", "image"):
-        single(f"{mode}, fixed track (oval)",
-               lambda mode=mode: gym.make("TfaldaTrack-v0", observation=mode, track="oval"),
-               steps)
-        single(f"{mode}, new generated track per reset",
-               lambda mode=mode: gym.make("TfaldaTrack-v0", observation=mode), steps)
+        results.update(interleaved_steps_per_second({
+            f"{mode}, fixed track (oval)":
+                lambda mode=mode: gym.make("TfaldaTrack-v0", observation=mode, track="oval"),
+            f"{mode}, new generated track per reset":
+                lambda mode=mode: gym.make("TfaldaTrack-v0", observation=mode)}, steps, quiet))
     if all_cpus is not None:  # the vector envs get the whole machine
         os.sched_setaffinity(0, all_cpus)
     for n in (1, 2):
