@@ -128,7 +128,17 @@ class TfaldaDetector:
     @property
     def rois(self) -> list[tuple[int, int, int, int]]:
         """The ``(x, y, w, h)`` windows [px] the next frame is read through."""
-        return windows(self._rois)
+        return list(self._windows()[0])
+
+    def _windows(self) -> tuple[list[tuple[int, int, int, int]], np.ndarray]:
+        """``windows`` of the current ROIs and the same as an int32 array, made once per
+        set of ROIs (a frame asks for them four times). The ROI lists are replaced, never
+        changed in place, so the list itself is the key (and kept alive by the cache)."""
+        cached = getattr(self, "_windows_of", None)  # None: unpickled from before it
+        if cached is None or cached[0] is not self._rois:
+            wins = windows(self._rois)
+            cached = self._windows_of = (self._rois, wins, np.array(wins, dtype=np.int32))
+        return cached[1], cached[2]
 
     # ----------------------------------------------------------------- frames
     def process(self, frame: np.ndarray) -> LaneObservation:
@@ -139,7 +149,7 @@ class TfaldaDetector:
 
     def process_crops(self, crops: list[np.ndarray]) -> LaneObservation:
         """Detect the lanes from the crops of ``rois`` only (same order and sizes)."""
-        wins = self.rois
+        wins = self._windows()[0]
         if len(crops) != len(wins):
             raise ValueError(f"expected {len(wins)} crops (one per ROI), got {len(crops)}")
         for k, (crop, (_, _, w, h)) in enumerate(zip(crops, wins, strict=True)):
@@ -154,6 +164,7 @@ class TfaldaDetector:
         cfg = self.config
         first = self._previous is None
         rois_used = self._rois
+        rois_array = self._windows()[1]
         rows: Rows = []
         held = np.zeros(2 * len(rois_used), dtype=bool)
         for r, pair in enumerate(rois_used):
@@ -186,7 +197,7 @@ class TfaldaDetector:
             state_kind = self._place(base, final, first)
         obs = LaneObservation(
             frame=self._frames,
-            rois=np.array(windows(rois_used), dtype=np.int32),
+            rois=rois_array.copy(),
             lanes=np.array([(ln.x_top, ln.y_top, ln.x_bottom, ln.y_bottom)
                             for pair in final for ln in pair], dtype=np.float64),
             d=np.array([ln.d for pair in final for ln in pair], dtype=np.float64),
@@ -208,7 +219,7 @@ class TfaldaDetector:
             self.reset()
         else:
             self._previous = final
-        object.__setattr__(obs, "next_rois", np.array(self.rois, dtype=np.int32))
+        object.__setattr__(obs, "next_rois", self._windows()[1].copy())
         return obs
 
     def _find(self, crop: np.ndarray, roi: Roi, prev: LaneSegment | None,
