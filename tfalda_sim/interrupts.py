@@ -13,8 +13,9 @@ from __future__ import annotations
 import contextlib
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from types import FrameType
+from typing import Any
 
 STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 """The signals that stop a command cleanly."""
@@ -34,6 +35,31 @@ def _note_sigint(signum: int, frame: FrameType | None) -> None:
     signal.default_int_handler(signum, frame)
 
 
+_Handler = Callable[[int, FrameType | None], Any] | int | None
+"""What ``signal.getsignal`` returns."""
+
+
+@contextlib.contextmanager
+def _handling(choose: Callable[[dict[signal.Signals, _Handler]],
+                               dict[signal.Signals, _Handler]]
+              ) -> Iterator[dict[signal.Signals, _Handler] | None]:
+    """Install ``choose(saved)``'s handlers for the stop signals inside the block (given
+    the ones in force, ``saved``, which the block gets), then restore them. Signals can be
+    handled in the main thread only: elsewhere nothing is installed and the block gets
+    None."""
+    if threading.current_thread() is not threading.main_thread():
+        yield None
+        return
+    saved = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
+    for sig, handler in choose(saved).items():
+        signal.signal(sig, handler)
+    try:
+        yield saved
+    finally:
+        for sig, handler in saved.items():
+            signal.signal(sig, handler)
+
+
 @contextlib.contextmanager
 def stop_signals_interrupt() -> Iterator[None]:
     """Inside the block SIGTERM and SIGHUP raise KeyboardInterrupt (main thread only; a
@@ -41,20 +67,18 @@ def stop_signals_interrupt() -> Iterator[None]:
     the handlers are restored after it."""
     global _last_signal
     _last_signal = signal.SIGINT
-    if threading.current_thread() is not threading.main_thread():
+
+    def choose(saved: dict[signal.Signals, _Handler]) -> dict[signal.Signals, _Handler]:
+        chosen: dict[signal.Signals, _Handler] = {}
+        if saved[signal.SIGINT] is signal.default_int_handler:
+            chosen[signal.SIGINT] = _note_sigint
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            if saved[sig] is not signal.SIG_IGN:
+                chosen[sig] = _raise_interrupt
+        return chosen
+
+    with _handling(choose):
         yield
-        return
-    saved = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
-    if saved[signal.SIGINT] is signal.default_int_handler:
-        signal.signal(signal.SIGINT, _note_sigint)
-    for sig in (signal.SIGTERM, signal.SIGHUP):
-        if saved[sig] is not signal.SIG_IGN:
-            signal.signal(sig, _raise_interrupt)
-    try:
-        yield
-    finally:
-        for sig, handler in saved.items():
-            signal.signal(sig, handler)
 
 
 def last_stop_signal() -> int:
@@ -66,17 +90,8 @@ def last_stop_signal() -> int:
 def ignoring_stops() -> Iterator[None]:
     """Ignore the stop signals inside the block (saving what was finished), then restore
     the handlers; a no-op outside the main thread."""
-    if threading.current_thread() is not threading.main_thread():
+    with _handling(lambda saved: dict.fromkeys(saved, signal.SIG_IGN)):
         yield
-        return
-    saved = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
-    for sig in STOP_SIGNALS:
-        signal.signal(sig, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        for sig, handler in saved.items():
-            signal.signal(sig, handler)
 
 
 @contextlib.contextmanager
@@ -86,24 +101,15 @@ def deferring_stops() -> Iterator[None]:
     for the few milliseconds in which one finished result goes to all of its outputs, so
     that a Ctrl-C keeps it whole or not at all, and is never lost. A no-op outside the
     main thread."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    saved = {sig: signal.getsignal(sig) for sig in STOP_SIGNALS}
     held: list[int] = []
 
     def hold(signum: int, frame: FrameType | None) -> None:
         held.append(signum)
 
-    for sig, handler in saved.items():
-        if handler is not signal.SIG_IGN:
-            signal.signal(sig, hold)
-    try:
+    with _handling(lambda saved: {sig: hold for sig, handler in saved.items()
+                                  if handler is not signal.SIG_IGN}) as saved:
         yield
-    finally:
-        for sig, handler in saved.items():
-            signal.signal(sig, handler)
-    if held:
+    if held and saved is not None:
         handler = saved[signal.Signals(held[0])]
         if callable(handler):
             handler(held[0], None)
