@@ -44,23 +44,9 @@ WARMUP_STEPS = 20  # JIT compilation, caches
 
 
 def steps_per_second(env: gym.Env, steps: int, desc: str, quiet: bool) -> dict[str, float]:
-    """Random-policy steps/s of one env over ``steps`` steps (resets included)."""
-    env.action_space.seed(0)
-    env.reset(seed=0)
-    for _ in range(WARMUP_STEPS):
-        env.step(env.action_space.sample())
-    env.reset(seed=1)
-    resets = 0
-    t0 = time.perf_counter()
-    for _ in tqdm(range(steps), desc=desc, disable=quiet, file=sys.stderr):
-        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-        if terminated or truncated:
-            env.reset()
-            resets += 1
-    elapsed = time.perf_counter() - t0
-    env.close()
-    return {"steps_per_s": steps / elapsed, "ms_per_step": 1000 * elapsed / steps,
-            "episodes": resets + 1}
+    """Random-policy steps/s of one env over ``steps`` steps (resets included; warmed up
+    first, then stepped from ``reset(seed=1)``)."""
+    return interleaved_steps_per_second({desc: lambda: env}, steps, quiet)[desc]
 
 
 CHUNK_STEPS = 300
@@ -69,9 +55,10 @@ CHUNK_STEPS = 300
 
 def interleaved_steps_per_second(makes: dict[str, Callable[[], gym.Env]], steps: int,
                                  quiet: bool) -> dict[str, dict[str, float]]:
-    """``steps_per_second`` of several envs at once: each warmed up as there, then all
-    stepped in turns of ``CHUNK_STEPS`` steps until each has made ``steps``; an env's time
-    is the sum of its turns."""
+    """Random-policy steps/s of several envs at once (resets included): each warmed up by
+    ``WARMUP_STEPS`` steps, reset with seed 1, then all stepped in turns of
+    ``CHUNK_STEPS`` steps until each has made ``steps``; an env's time is the sum of its
+    turns."""
     envs = {name: make() for name, make in makes.items()}
     clock = dict.fromkeys(envs, 0.0)
     resets = dict.fromkeys(envs, 0)

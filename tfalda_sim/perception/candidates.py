@@ -272,12 +272,11 @@ def find_lane(small: np.ndarray, horizontal_edges: bool, rising: bool, roi_x: fl
     """``choose_lane`` of the Sobel (``sobel_into``) of the resampled crop ``small``: the
     detector's per-ROI kernel, one call after the resize."""
     h, w = small.shape
+    args = (roi_x, scale_x, first, previous_p_px, previous_d_px, previous_i, kp, kd, ki)
     if max(h, w) <= UINT16_MAX_SAMPLES:  # every segment sum fits 16 bits
         flat16 = np.zeros(h * w + SIMD_BLOCK, np.uint16)
         sobel_into(small, horizontal_edges, rising, flat16)
-        return _pick(flat16, h, w, roi_x, scale_x, first, previous_p_px, previous_d_px,
-                     previous_i, kp, kd, ki)
+        return _pick(flat16, h, w, *args)
     flat = np.zeros(h * w + SIMD_BLOCK, np.int32)
     sobel_into(small, horizontal_edges, rising, flat)
-    return _pick(flat, h, w, roi_x, scale_x, first, previous_p_px, previous_d_px,
-                 previous_i, kp, kd, ki)
+    return _pick(flat, h, w, *args)

@@ -191,11 +191,10 @@ def _sample_atlas(tex: np.ndarray, atlas: np.ndarray, rows: np.ndarray, cols: np
     a00, a01, a02, a10, a11, a12, lo, hx, hy = _texel_transform(affine, size_x, size_y)
     shift = np.float32(wall_shift)
     wrap = np.float32(wall_cols)
-    mx = np.empty(coord_a.shape[1], np.float32)
-    my = np.empty(coord_a.shape[1], np.float32)
     h32, w32 = np.int32(atlas.shape[0]), np.int32(atlas.shape[1])  # < 2^31 texels
     flat = atlas.reshape(-1)
-    n = coord_a.shape[1]
+    n = coord_a.shape[1]  # the widest piece: scratch for one piece at a time
+    mx, my = np.empty(n, np.float32), np.empty(n, np.float32)
     frac_x, frac_y = np.empty(n, np.float32), np.empty(n, np.float32)
     at, top, bottom = np.empty(n, np.int32), np.empty(n, np.uint16), np.empty(n, np.uint16)
     for t in range(len(rows)):
@@ -397,12 +396,12 @@ def _pack_pieces(boxes: np.ndarray, cuts: np.ndarray, seg_reads: np.ndarray,
                  seg_code: np.ndarray, seg_flags: np.ndarray, pack: int
                  ) -> tuple[np.ndarray, np.ndarray, int]:
     """Cut every row of the windows ``boxes`` ``(k, 4)`` (x, y, w, h) [px] into pieces of
-    one pixel code (``_atlas_maps``) and flags: ``cuts[r]`` lists the columns where row r
+    one pixel code (``_sample_atlas``) and flags: ``cuts[r]`` lists the columns where row r
     changes them, padded with the image width, and segment i of row r (up to column
     ``cuts[r, i]``) has code ``seg_code[r, i]``, flags ``seg_flags[r, i]`` and reads the
-    atlas if ``seg_reads[r, i]``
-    (ceiling pixels are a constant grey, not sampled). Per-row tables, not lookups in the
-    image-sized arrays: those are cold in cache here and cost µs.
+    atlas if ``seg_reads[r, i]`` (ceiling pixels are a constant grey, not sampled).
+    Per-row tables, not lookups in the image-sized arrays: those are cold in cache here
+    and cost µs.
 
     Returns ``(6, n)``: row, first column, width, offset in the output, offset in the
     sampled buffer (ceiling runs: the zero tail after the sampled pixels, rounded up to
@@ -587,7 +586,7 @@ class _Stack:
     s_cols: np.ndarray
     s_widths: np.ndarray
     s_offsets: np.ndarray
-    s_codes: np.ndarray  # pixel code of each sampled piece (``_atlas_maps``)
+    s_codes: np.ndarray  # pixel code of each sampled piece (``_sample_atlas``)
     tex_rows: int
     zero_len: int
     out_len: int
@@ -597,52 +596,35 @@ class _Stack:
 
 
 @dataclass(frozen=True)
-class _Layout:
-    """Per-pixel constants for one atlas layout and hall (cached by the renderer): the
-    pixel layout's arrays, which do not depend on the atlas, and the few numbers that do
-    (``piece_table``, ``wall_y``). A new track moves the atlas's levels and costs no
-    per-pixel work."""
+class _PixelLayout:
+    """Per-pixel constants that do not depend on where the atlas puts its levels and walls
+    (cached per resolution, level count, hall and wall height)."""
 
     coord_a: np.ndarray  # ground: car-frame x [m]; walls: wall column at yaw 0 [texels]
     coord_b: np.ndarray  # ground: car-frame y [m]; elsewhere the padding coordinate
     wall_row: np.ndarray  # walls: row in the wall texture [texels] (float64); else 0
-    code: np.ndarray  # uint8: level on the ground, levels on the walls, levels + 1 ceiling
     flags: np.ndarray  # uint8: 1 ground, 2 bonnet, 4 ceiling
-    reads_atlas: np.ndarray  # bool per pixel: not ceiling (a constant grey)
-    cuts: np.ndarray  # per row: columns where reads_atlas, code or flags change (+ width)
-    seg_code: np.ndarray  # per row and segment between cuts: its code, its flags
-    seg_flags: np.ndarray
-    seg_reads: np.ndarray  # … and whether it reads the atlas
-    block_start: np.ndarray  # ``_block_bounds`` of the pixel layout
+    cuts: np.ndarray  # per row: columns where the pixel code or the flags change (+ width)
+    seg_code: np.ndarray  # per row and segment between cuts: its code (level on the
+    seg_flags: np.ndarray  # ground, levels on the walls, levels + 1 ceiling), its flags
+    seg_reads: np.ndarray  # … and whether it reads the atlas (not ceiling alone)
+    block_start: np.ndarray  # ``_block_bounds``
     block_bounds: np.ndarray
     block_walls: np.ndarray
     block_cols: int  # image blocks per row
-    pixel_key: int  # uid of its ``_PixelLayout``: what window packings depend on
+    uid: int  # serial number (``_pixel_layout_ids``): what window packings depend on
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """One atlas layout and hall (cached by the renderer): the pixel layout, and the few
+    numbers that depend on where the atlas puts its levels and walls. A new track moves
+    the atlas's levels and costs no per-pixel work."""
+
     pixel: _PixelLayout
     levels: int  # mip levels: the code of the walls
     piece_table: np.ndarray  # (levels + 2, 3) float32 per code: scale, atlas offsets x, y
     wall_y: float  # atlas row of the wall texture's row 0
-
-
-@dataclass(frozen=True)
-class _PixelLayout:
-    """The part of a ``_Layout`` that does not depend on where the atlas puts its levels
-    and walls (cached per resolution, level count, hall and wall height)."""
-
-    coord_a: np.ndarray
-    coord_b: np.ndarray
-    wall_row: np.ndarray
-    code: np.ndarray
-    flags: np.ndarray
-    reads_atlas: np.ndarray
-    cuts: np.ndarray
-    seg_code: np.ndarray
-    seg_flags: np.ndarray
-    seg_reads: np.ndarray
-    block_start: np.ndarray
-    block_bounds: np.ndarray
-    block_walls: np.ndarray
-    uid: int  # serial number (``_pixel_layout_ids``)
 
 
 def _segments(switch: np.ndarray, code: np.ndarray, flags: np.ndarray, reads: np.ndarray
@@ -713,7 +695,7 @@ class Renderer:
     def _layout(self, scene: Scene) -> _Layout:
         return self._scene_data(scene)[0]
 
-    def _pixel_layout(self, scene: Scene) -> tuple[_PixelLayout, tuple]:
+    def _pixel_layout(self, scene: Scene) -> _PixelLayout:
         key = (scene.resolution_m, scene.levels, scene.hall, scene.wall_size[1])
         base = self._pixel_layouts.get(key)
         if base is None:
@@ -721,7 +703,7 @@ class Renderer:
             if len(self._pixel_layouts) >= 4:
                 self._pixel_layouts.pop(next(iter(self._pixel_layouts)))
             self._pixel_layouts[key] = base
-        return base, key
+        return base
 
     def _build_pixel_layout(self, scene: Scene) -> _PixelLayout:
         g = self.geometry
@@ -751,9 +733,7 @@ class Renderer:
             coord_a=np.where(is_ground, g.gx, wall_col).astype(f32),
             coord_b=np.where(is_ground, g.gy, _PAD).astype(f32),
             wall_row=wall_row,
-            code=code,
             flags=flags,
-            reads_atlas=flags != 4,
             cuts=cuts,
             seg_code=seg_code,
             seg_flags=seg_flags,
@@ -761,13 +741,14 @@ class Renderer:
             block_start=block_start,
             block_bounds=block_bounds,
             block_walls=block_walls,
+            block_cols=-(-flags.shape[1] // FOOTPRINT_BLOCK_PX),
             uid=next(_pixel_layout_ids),
         )
 
     def _build_layout(self, scene: Scene) -> _Layout:
         """The scene's layout: the cached pixel layout plus where this atlas puts its
         levels and walls (the same float64 sums as ever, rounded to float32 once)."""
-        base, _ = self._pixel_layout(scene)
+        base = self._pixel_layout(scene)
         levels = scene.levels
         origin = scene.level_origin
         bias = np.zeros((2, levels + 2))
@@ -780,16 +761,8 @@ class Renderer:
         table = np.zeros((levels + 2, 3), np.float32)
         table[:levels, 0] = 0.5 ** np.arange(levels, dtype=np.int64)
         table[:, 1:] = bias.T  # rounded to float32 once, as the offsets always were
-        return _Layout(
-            coord_a=base.coord_a, coord_b=base.coord_b, wall_row=base.wall_row,
-            code=base.code, flags=base.flags, reads_atlas=base.reads_atlas, cuts=base.cuts,
-            seg_code=base.seg_code, seg_flags=base.seg_flags, seg_reads=base.seg_reads,
-            block_start=base.block_start, block_bounds=base.block_bounds,
-            block_walls=base.block_walls,
-            block_cols=-(-base.flags.shape[1] // FOOTPRINT_BLOCK_PX), pixel_key=base.uid,
-            pixel=base, levels=levels, piece_table=table,
-            wall_y=float(scene.wall_origin[1]),
-        )
+        return _Layout(pixel=base, levels=levels, piece_table=table,
+                       wall_y=float(scene.wall_origin[1]))
 
     def _buffers(self, st: _Stack, with_light: bool
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -874,7 +847,8 @@ class Renderer:
         fx = scene.effects
         layout, box_faces, _ = self._scene_data(scene)
         gain, sheen, params = self._maps_for(fx)
-        st = self._stack(boxes, layout)
+        st = self._stack(boxes, layout.pixel)
+        px = layout.pixel
         blur_m = speed_m_s * fx.motion_blur_s
         shifts = np.linspace(0.0, blur_m, MOTION_BLUR_SAMPLES) if blur_m > 0 else (0.0,)
         blur = len(shifts) > 1
@@ -897,13 +871,13 @@ class Renderer:
             if not st.tex_rows:
                 break
             maps_args = (st.s_rows, st.s_cols, st.s_widths, st.s_offsets)
-            _sample_atlas(tex, scene.atlas, *maps_args, st.s_codes, layout.coord_a,
-                          layout.coord_b, layout.wall_row, layout.piece_table, layout.levels,
+            _sample_atlas(tex, scene.atlas, *maps_args, st.s_codes, px.coord_a, px.coord_b,
+                          px.wall_row, layout.piece_table, layout.levels,
                           layout.wall_y, affine, size_x, size_y, wall_shift,
                           float(scene.wall_size[0]))
             if with_light and k == 0:
                 _light_maps(light_maps[0].reshape(-1), light_maps[1].reshape(-1), *maps_args,
-                            layout.coord_a, layout.coord_b, affine, size_x, size_y,
+                            px.coord_a, px.coord_b, affine, size_x, size_y,
                             scene.resolution_m / LIGHT_RES_M)
             if blur:
                 total += tex
@@ -920,14 +894,14 @@ class Renderer:
         noise_offset = _noise_offset(frame_seed, width * height)
         pieces = (out, st.out_offsets, st.rows, st.cols, st.widths)
         if with_light:
-            _combine_lit(*pieces, st.tex_offsets, sampled, light.reshape(-1), layout.flags,
+            _combine_lit(*pieces, st.tex_offsets, sampled, light.reshape(-1), px.flags,
                          gain, sheen, self._noise, noise_offset, width, params)
         else:
             _combine(*pieces, st.tex_offsets, st.flags, sampled, gain, sheen, self._noise,
                      noise_offset, width, params)
         if drawn is not None:
             (ox0, oy0), ids, shades = drawn
-            _paint_obstacles(*pieces, ids, shades, ox0, oy0, layout.flags, gain, self._noise,
+            _paint_obstacles(*pieces, ids, shades, ox0, oy0, px.flags, gain, self._noise,
                              noise_offset, width, params)
         return [out[o:o + ww * wh].reshape(wh, ww)
                 for o, (_, _, ww, wh) in zip(st.window_offsets, boxes, strict=True)]
@@ -947,18 +921,17 @@ class Renderer:
             boxes.append((wx0, wy0, ww, wh))
         return tuple(boxes)
 
-    def _stack(self, boxes: tuple, layout: _Layout) -> _Stack:
+    def _stack(self, boxes: tuple, px: _PixelLayout) -> _Stack:
         """How the windows' pixels are packed (cached per window list and pixel layout:
         the same for every track)."""
-        key = (layout.pixel_key, boxes)
+        key = (px.uid, boxes)
         cached = self._stacks.get(key)
         if cached is not None:
             return cached
         pieces, s_pieces, tex_rows, level_bounds, wall_lo, wall_hi = _pack_windows(
-            np.array(boxes, np.int64), layout.cuts, layout.seg_reads, layout.seg_code,
-            layout.seg_flags, _PACK,
-            layout.block_start, layout.block_bounds, layout.block_walls,
-            FOOTPRINT_BLOCK_PX, layout.block_cols)
+            np.array(boxes, np.int64), px.cuts, px.seg_reads, px.seg_code, px.seg_flags,
+            _PACK, px.block_start, px.block_bounds, px.block_walls, FOOTPRINT_BLOCK_PX,
+            px.block_cols)
         window_offsets = []
         out_len = zero_len = 0
         for _, _, ww, wh in boxes:

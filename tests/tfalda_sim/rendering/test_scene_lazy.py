@@ -197,7 +197,7 @@ def test_a_view_s_boxes_cover_every_ground_pixel_it_reads(renderer: Renderer) ->
     from tfalda_sim.rendering.renderer import FOOTPRINT_BLOCK_PX, _view_bounds
 
     scene = build_scene(generated(3), Effects())
-    layout = renderer._layout(scene)
+    layout = renderer._layout(scene).pixel
     level = np.clip(np.rint(renderer.geometry.log2_fp - np.log2(scene.resolution_m)), 0,
                     scene.levels - 1).astype(np.int64)
     rng = np.random.default_rng(0)
@@ -217,7 +217,7 @@ def test_a_view_s_boxes_cover_every_ground_pixel_it_reads(renderer: Renderer) ->
             for c in range(x0, x0 + w, 3):
                 if not layout.flags[r, c] & 1:
                     continue
-                gx, gy = layout.coord_a[r, c], layout.pixel.coord_b[r, c]
+                gx, gy = layout.coord_a[r, c], layout.coord_b[r, c]
                 inside = ((bounds[:, 0] == level[r, c]) & (bounds[:, 1] <= gx)
                           & (gx <= bounds[:, 2]) & (bounds[:, 3] <= gy) & (gy <= bounds[:, 4]))
                 assert inside.any(), (r, c)
