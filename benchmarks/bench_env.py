@@ -12,23 +12,32 @@ road every ≈ 50 steps, so a reset's cost counts):
   re-uses its scene) and with the default, a new generated track every reset;
 - ``gymnasium.make_vec("TfaldaTrack-v0", num_envs=N)`` for N = 1 and 2 (the env's default
   vectorisation mode) and, for comparison, Gymnasium's ``AsyncVectorEnv`` with 2 envs, in
-  "lanes" mode on default generated tracks; steps are env steps (N per vector step).
+  "lanes" mode on default generated tracks; steps are env steps (N per vector step);
+- the machine's ceiling for them: one single env alone in a process, then one in each of
+  2 processes at once (pinned one per core, talking to nobody while they step). Two busy
+  processes share caches, memory bandwidth and, on a VM, the host with its other guests:
+  their ratio is what any 2-env vector env could reach here.
 
 Single envs run pinned to one core with OpenCV on one thread (figures per core); the vector
 envs get every core of the machine. A mode's fixed-track and generated-track envs run
 interleaved, in chunks of ``CHUNK_STEPS`` steps each in turn, so that the host's drift
-(± 10 % between runs a minute apart here) does not enter their ratio. Needs Box2D for the reference
+(± 10 % between runs a minute apart here) does not enter their ratio; so do the vector envs
+(``make_vec`` with 1 and 2 envs and ``AsyncVectorEnv``), in turns of ≈ ``CHUNK_STEPS`` env
+steps. Needs Box2D for the reference
 (``pip install "gymnasium[box2d]"``, in the ``dev`` extra).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import multiprocessing
 import os
 import sys
 import time
 from collections.abc import Callable
+from multiprocessing.connection import Connection
 from typing import Any
 
 import cv2
@@ -40,6 +49,11 @@ from tqdm import tqdm
 import tfalda_sim  # noqa: F401  (registers TfaldaTrack-v0)
 
 REFERENCE = "CarRacing-v3 (reference)"
+MAKE_VEC_1 = "make_vec, 1 env, lanes, generated"
+MAKE_VEC_2 = "make_vec, 2 envs, lanes, generated"
+CEILING_1 = "1 process alone, lanes, generated"
+CEILING_2 = "2 processes at once, lanes, generated"
+SCALING_CEILING = "2 processes at once / 1 (the machine's ceiling)"
 WARMUP_STEPS = 20  # JIT compilation, caches
 
 
@@ -92,24 +106,130 @@ def interleaved_steps_per_second(makes: dict[str, Callable[[], gym.Env]], steps:
 def vector_steps_per_second(make: Callable[[], gym.vector.VectorEnv], steps: int, desc: str,
                             quiet: bool) -> dict[str, float]:
     """Env steps/s of a vector env (autoreset inside) over about ``steps`` env steps."""
-    venv = make()
-    try:
-        n = venv.num_envs
+    return interleaved_vector_steps_per_second({desc: make}, steps, quiet)[desc]
+
+
+class _VectorTurns:
+    """A vector env stepped in turns (``interleaved_vector_steps_per_second``)."""
+
+    def __init__(self, venv: gym.vector.VectorEnv) -> None:
+        self.venv = venv
+        self.num_envs = venv.num_envs
         venv.action_space.seed(0)
         venv.reset(seed=0)
         for _ in range(WARMUP_STEPS):
             venv.step(venv.action_space.sample())
-        calls = max(1, steps // n)
-        episodes = 0
+
+    def turn(self, calls: int) -> tuple[float, int]:
+        """``calls`` vector steps: their time [s] and the episodes they ended."""
+        venv, episodes = self.venv, 0
         t0 = time.perf_counter()
-        for _ in tqdm(range(calls), desc=desc, disable=quiet, file=sys.stderr):
+        for _ in range(calls):
             _, _, terminated, truncated, _ = venv.step(venv.action_space.sample())
             episodes += int(np.count_nonzero(terminated | truncated))
-        elapsed = time.perf_counter() - t0
+        return time.perf_counter() - t0, episodes
+
+    def close(self) -> None:
+        self.venv.close()
+
+
+def _solo_process(conn: Connection, cpu: int | None, seed: int) -> None:
+    """One env stepped alone in its own process, pinned to ``cpu``: ``n`` steps per
+    message ``n`` (0 ends it), answered with (time [s], episodes)."""
+    if cpu is not None:
+        os.sched_setaffinity(0, {cpu})
+    cv2.setNumThreads(1)
+    env = gym.make("TfaldaTrack-v0")
+    env.action_space.seed(seed)
+    env.reset(seed=seed)
+    for _ in range(WARMUP_STEPS):
+        env.step(env.action_space.sample())
+    conn.send(None)
+    while n := conn.recv():
+        episodes = 0
+        t0 = time.perf_counter()
+        for _ in range(n):
+            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            if terminated or truncated:
+                env.reset()
+                episodes += 1
+        conn.send((time.perf_counter() - t0, episodes))
+    env.close()
+
+
+class _SoloProcessTurns:
+    """``n`` single envs in as many processes, one per core, stepped at the same time and
+    talking to nobody while they step: what the machine gives ``n`` busy processes of
+    this workload at once (its cache, memory bandwidth, and the host's other guests
+    share), the ceiling of any vector env. A turn lasts until the slower process is
+    done."""
+
+    def __init__(self, n: int, cpus: list[int] | None) -> None:
+        ctx = multiprocessing.get_context("spawn")
+        self.num_envs = n
+        self.conns, self.procs = [], []
+        for i in range(n):
+            parent, child = ctx.Pipe()
+            cpu = cpus[i % len(cpus)] if cpus else None
+            proc = ctx.Process(target=_solo_process, args=(child, cpu, i), daemon=True)
+            proc.start()
+            self.conns.append(parent)
+            self.procs.append(proc)
+        for conn in self.conns:
+            conn.recv()  # warmed up
+
+    def turn(self, calls: int) -> tuple[float, int]:
+        t0 = time.perf_counter()
+        for conn in self.conns:
+            conn.send(calls)
+        episodes = sum(conn.recv()[1] for conn in self.conns)
+        return time.perf_counter() - t0, episodes
+
+    def close(self) -> None:
+        for conn in self.conns:
+            with contextlib.suppress(OSError):
+                conn.send(0)
+        for proc in self.procs:
+            proc.join(timeout=10)
+            if proc.is_alive():
+                proc.kill()
+
+
+def interleaved_vector_steps_per_second(makes: dict[str, Callable[[], Any]], steps: int,
+                                        quiet: bool) -> dict[str, dict[str, float]]:
+    """Env steps/s of several vector envs (autoreset inside) at once: each made and warmed
+    up (``WARMUP_STEPS`` vector steps), then all stepped in turns of about ``CHUNK_STEPS``
+    env steps (``CHUNK_STEPS // num_envs`` vector steps) until each has made about
+    ``steps``; one's time is the sum of its turns. ``makes`` give a vector env, or a
+    ``_SoloProcessTurns``. Idle vector envs' workers block on their pipes, so a turn has
+    the machine to itself."""
+    runners: dict[str, Any] = {}
+    try:
+        for name, make in makes.items():
+            made = make()
+            runners[name] = made if isinstance(made, _SoloProcessTurns) else _VectorTurns(made)
+        calls = {name: max(1, steps // r.num_envs) for name, r in runners.items()}
+        done = dict.fromkeys(runners, 0)
+        clock = dict.fromkeys(runners, 0.0)
+        episodes = dict.fromkeys(runners, 0)
+        with tqdm(total=sum(calls[k] * r.num_envs for k, r in runners.items()),
+                  desc=" + ".join(runners), disable=quiet, file=sys.stderr) as bar:
+            while any(done[k] < calls[k] for k in runners):
+                for name, runner in runners.items():
+                    n = min(max(1, CHUNK_STEPS // runner.num_envs), calls[name] - done[name])
+                    if n <= 0:
+                        continue
+                    elapsed, ended = runner.turn(n)
+                    clock[name] += elapsed
+                    episodes[name] += ended
+                    done[name] += n
+                    bar.update(n * runner.num_envs)
     finally:
-        venv.close()
-    return {"steps_per_s": calls * n / elapsed, "ms_per_step": 1000 * elapsed / (calls * n),
-            "episodes": episodes}
+        for runner in runners.values():
+            runner.close()
+    return {name: {"steps_per_s": calls[name] * r.num_envs / clock[name],
+                   "ms_per_step": 1000 * clock[name] / (calls[name] * r.num_envs),
+                   "episodes": episodes[name]} for name, r in runners.items()}
 
 
 def run(steps: int, quiet: bool) -> dict[str, Any]:
@@ -136,24 +256,26 @@ def run(steps: int, quiet: bool) -> dict[str, Any]:
                 lambda mode=mode: gym.make("TfaldaTrack-v0", observation=mode)}, steps, quiet))
     if all_cpus is not None:  # the vector envs get the whole machine
         os.sched_setaffinity(0, all_cpus)
-    for n in (1, 2):
-        name = f"make_vec, {n} env{'s' if n > 1 else ''}, lanes, generated"
-        results[name] = vector_steps_per_second(
-            lambda n=n: gym.make_vec("TfaldaTrack-v0", num_envs=n), steps, name, quiet)
-    name = "AsyncVectorEnv, 2 envs, lanes, generated"
-    results[name] = vector_steps_per_second(
-        lambda: gym.make_vec("TfaldaTrack-v0", num_envs=2, vectorization_mode="async"),
-        steps, name, quiet)
+    cpus = sorted(all_cpus) if all_cpus is not None else None
+    results.update(interleaved_vector_steps_per_second({
+        MAKE_VEC_1: lambda: gym.make_vec("TfaldaTrack-v0", num_envs=1),
+        MAKE_VEC_2: lambda: gym.make_vec("TfaldaTrack-v0", num_envs=2),
+        "AsyncVectorEnv, 2 envs, lanes, generated":
+            lambda: gym.make_vec("TfaldaTrack-v0", num_envs=2, vectorization_mode="async"),
+        CEILING_1: lambda: _SoloProcessTurns(1, cpus),
+        CEILING_2: lambda: _SoloProcessTurns(2, cpus),
+    }, steps, quiet))
     reference = results[REFERENCE]
     ref_rate = reference["steps_per_s"] if isinstance(reference, dict) else None
     for r in results.values():
         if isinstance(r, dict) and ref_rate:
             r["ratio_to_car_racing"] = r["steps_per_s"] / ref_rate
     scaling = {}
-    one = results.get("make_vec, 1 env, lanes, generated")
-    two = results.get("make_vec, 2 envs, lanes, generated")
-    if isinstance(one, dict) and isinstance(two, dict):
-        scaling["make_vec 2 envs / 1 env"] = two["steps_per_s"] / one["steps_per_s"]
+    for label, (one, two) in {"make_vec 2 envs / 1 env": (MAKE_VEC_1, MAKE_VEC_2),
+                              SCALING_CEILING: (CEILING_1, CEILING_2)}.items():
+        a, b = results.get(one), results.get(two)
+        if isinstance(a, dict) and isinstance(b, dict):
+            scaling[label] = b["steps_per_s"] / a["steps_per_s"]
     fixed = results.get("lanes, fixed track (oval)")
     generated = results.get("lanes, new generated track per reset")
     if isinstance(fixed, dict) and isinstance(generated, dict):

@@ -30,8 +30,11 @@ def test_bench_env_reports_every_configuration_against_car_racing() -> None:
         assert isinstance(r, dict), f"{name}: {r}"
         assert r["steps_per_s"] > 0 and r["ratio_to_car_racing"] > 0
     assert {"make_vec, 1 env, lanes, generated", "make_vec, 2 envs, lanes, generated",
-            "lanes, fixed track (oval)", "lanes, new generated track per reset"} <= set(envs)
+            "lanes, fixed track (oval)", "lanes, new generated track per reset",
+            "1 process alone, lanes, generated",
+            "2 processes at once, lanes, generated"} <= set(envs)
     assert set(result["ratios"]) == {"make_vec 2 envs / 1 env",
+                                     "2 processes at once / 1 (the machine's ceiling)",
                                      "generated / fixed track (lanes)"}
 
 

@@ -390,11 +390,15 @@ class MipTiles:
         if memory is None:
             return None
         args = (self.sizes, self.tile, self.grids, self.offsets)
-        # Lists, not scans of ``filled`` (~10⁵ tiles): each fill's tiles, level 0 first.
-        for run in self._written_runs:
-            _zero_tiles(self.atlas, self.origins, run, *args)
-        if self.level0_in_atlas:  # level 0 also holds what the map painted for other scenes
-            _zero_tiles(self.atlas, self.origins, self.marking.painted_tiles(), *args)
+        # Lists, not scans of ``filled`` (~10⁵ tiles): each fill's tiles; level 0 also
+        # holds what a map painting into it painted for other scenes. One call: a kernel
+        # call from Python costs µs, and a scene has had ~30 fills.
+        runs = self._written_runs
+        if self.level0_in_atlas:
+            runs = [*runs, self.marking.painted_tiles()]
+        if runs:
+            _zero_tiles(self.atlas, self.origins, np.concatenate(runs), *args)
+        if self.level0_in_atlas:
             self.marking.detach()
             if _last_marking and _last_marking[0] is self.marking:
                 _last_marking.clear()
