@@ -782,9 +782,9 @@ def _others_reset(autoreset: np.ndarray, start: int, stop: int) -> bool:
 
 def _prepare_resets(envs: list[gym.Env]) -> None:
     """``prepare_reset`` on each env (a lane with time to spare: while another lane
-    resets, it generates its envs' next tracks, ≈ 1 ms of each of their resets, so that
-    the others wait less on them); never fails the lane (a reset that would fail still
-    fails, then, as it would have)."""
+    resets, it generates its envs' next tracks and builds their scenes, ≈ 2 ms of each of
+    their resets, so that the others wait less on them); never fails the lane (a reset
+    that would fail still fails, then, as it would have)."""
     for env in envs:
         with contextlib.suppress(Exception):
             env.unwrapped.prepare_reset()  # type: ignore[attr-defined]

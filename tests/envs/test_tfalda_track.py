@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pickle
 import warnings
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -325,30 +326,44 @@ def test_a_reset_refused_for_its_track_leaves_the_env_as_it_was() -> None:
     assert same(rollout(env, seed=0, steps=20), rollout(TfaldaTrackEnv(), seed=0, steps=20))
 
 
-def test_prepare_reset_generates_the_next_track_and_changes_nothing() -> None:
+@pytest.mark.parametrize("kwargs", [{}, {"domain_randomization": True},
+                                    {"faults": (MarkingGap(s_m=1.0, length_m=1.0),)}],
+                         ids=["default", "domain randomization", "faults"])
+def test_prepare_reset_prepares_the_next_episode_and_changes_nothing(
+        kwargs: dict[str, Any]) -> None:
     """``prepare_reset`` (a vector env's idle lane) generates the track the next reset
-    draws, which then takes it; episodes equal an env's that never prepared, and a seeded
-    reset (another draw) generates its own track."""
-    plain, eager = gym.make("TfaldaTrack-v0"), gym.make("TfaldaTrack-v0")
+    draws and builds its scene (effects, scene seed and faults drawn as the reset draws
+    them), which the reset then takes; episodes equal an env's that never prepared, and a
+    seeded reset (another draw) generates and builds its own."""
+    plain, eager = gym.make("TfaldaTrack-v0", **kwargs), gym.make("TfaldaTrack-v0", **kwargs)
     env = eager.unwrapped
     assert not env.prepare_reset()  # no np_random yet: nothing to draw from
     for e in (plain, eager):
         e.reset(seed=3)
-    for episode in range(3):
+    for episode in range(4):
         assert env.prepare_reset()
         assert not env.prepare_reset()  # prepared already
         spec, track = env._prepared
+        scene = env._prepared_scene[1]
+        before = env._scene
         if episode == 2:
             want, got = plain.reset(seed=9), eager.reset(seed=9)  # not the prepared draw
-            assert env._track is not track
+            assert env._track is not track and env._scene is not scene
         else:
             want, got = plain.reset(), eager.reset()
             assert env._track is track and env._track_label == spec
+            assert env._scene is scene and env._spare_scene is before
+        assert env._prepared_scene is None
         assert np.array_equal(want[0], got[0]) and want[1] == got[1]
         for _ in range(5):
             a = np.array([0.1], np.float32)
             pairs = zip(plain.step(a), eager.step(a), strict=True)
             assert all(np.array_equal(x, y) for x, y in pairs)
+        assert np.array_equal(plain.unwrapped.camera_frame(), env.camera_frame())
+    # The spare scene's memory went to the scene prepared next (it can render no more).
+    spare = env._spare_scene
+    assert env.prepare_reset() and env._spare_scene is None
+    assert spare.tiles is not None and spare.tiles.retired
     fixed = gym.make("TfaldaTrack-v0", track="oval").unwrapped
     fixed.reset(seed=0)
     assert not fixed.prepare_reset()  # a fixed track: nothing to generate
