@@ -195,18 +195,25 @@ class TfaldaDetector:
             state_kind = self._state.kind
         else:
             state_kind = self._place(base, final, first)
+        # One table of the lanes' numbers (one array made, not four): x_top, y_top,
+        # x_bottom, y_bottom, d, i, λ per lane.
+        table = np.array([(ln.p, ln.y_top, ln.p + ln.d, ln.y_bottom, ln.d, ln.i, ln.lam)
+                          for pair in final for ln in pair], dtype=np.float64).reshape(-1, 7)
+        replaced = held
+        if result is not None:
+            for r, row_replaced in enumerate(result.replaced):
+                if row_replaced:
+                    replaced[2 * r:2 * r + 2] = True
         obs = LaneObservation(
             frame=self._frames,
             rois=rois_array.copy(),
-            lanes=np.array([(ln.x_top, ln.y_top, ln.x_bottom, ln.y_bottom)
-                            for pair in final for ln in pair], dtype=np.float64),
-            d=np.array([ln.d for pair in final for ln in pair], dtype=np.float64),
-            intensity=np.array([ln.i for pair in final for ln in pair], dtype=np.float64),
-            lam=np.array([ln.lam for pair in final for ln in pair], dtype=np.float64),
-            replaced=held | np.repeat(np.array(result.replaced if result else
-                                               [False] * len(final)), 2),
-            corrected=np.array([c for pair in (result.corrected if result else
-                                               [(False, False)] * len(final)) for c in pair]),
+            lanes=table[:, :4].copy(),
+            d=table[:, 4].copy(),
+            intensity=table[:, 5].copy(),
+            lam=table[:, 6].copy(),
+            replaced=replaced,
+            corrected=(np.array([c for pair in result.corrected for c in pair], dtype=bool)
+                       if result is not None else np.zeros(2 * len(final), dtype=bool)),
             widths=np.asarray(widths, dtype=np.float64),
             fault_count=self.lis.fault_count,
             roi_reset=reset,

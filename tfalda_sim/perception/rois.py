@@ -90,10 +90,14 @@ def row_lambda_scales(layout: RoiLayout) -> list[float]:
 def clamp(roi: Roi, layout: RoiLayout) -> Roi:
     """``roi`` kept inside the image with ``border_px`` to spare on both sides and at
     least ``min_width_px`` wide (whatever the lanes did)."""
+    return _clamped(roi.x, roi.y, roi.width, roi.height, layout)
+
+
+def _clamped(x: int, y: int, width: int, height: int, layout: RoiLayout) -> Roi:
+    """``clamp`` of the ROI ``(x, y, width, height)`` [px], made once."""
     border, image_width = layout.border_px, layout.image_width
-    width = min(max(roi.width, layout.min_width_px), image_width - 2 * border)
-    x = min(max(roi.x, border), image_width - border - width)
-    return Roi(x, roi.y, width, roi.height)
+    width = min(max(width, layout.min_width_px), image_width - 2 * border)
+    return Roi(min(max(x, border), image_width - border - width), y, width, height)
 
 
 def follow(lane: LaneSegment, roi: Roi, layout: RoiLayout) -> Roi:
@@ -103,7 +107,7 @@ def follow(lane: LaneSegment, roi: Roi, layout: RoiLayout) -> Roi:
     x = round(min(lane.x_top, lane.x_bottom)) - layout.margin_left_px
     width = min(max(layout.extra_width_px + round(abs(lane.d)), layout.min_width_px),
                 layout.max_width_px)
-    return clamp(Roi(x, roi.y, width, roi.height), layout)
+    return _clamped(x, roi.y, width, roi.height, layout)  # runs per ROI and frame: one Roi
 
 
 class StraightState:
