@@ -115,10 +115,14 @@ class _VectorTurns:
     def __init__(self, venv: gym.vector.VectorEnv) -> None:
         self.venv = venv
         self.num_envs = venv.num_envs
-        venv.action_space.seed(0)
-        venv.reset(seed=0)
-        for _ in range(WARMUP_STEPS):
-            venv.step(venv.action_space.sample())
+        try:
+            venv.action_space.seed(0)
+            venv.reset(seed=0)
+            for _ in range(WARMUP_STEPS):
+                venv.step(venv.action_space.sample())
+        except BaseException:
+            venv.close()
+            raise
 
     def turn(self, calls: int) -> tuple[float, int]:
         """``calls`` vector steps: their time [s] and the episodes they ended."""
@@ -167,22 +171,36 @@ class _SoloProcessTurns:
     def __init__(self, n: int, cpus: list[int] | None) -> None:
         ctx = multiprocessing.get_context("spawn")
         self.num_envs = n
-        self.conns, self.procs = [], []
-        for i in range(n):
-            parent, child = ctx.Pipe()
-            cpu = cpus[i % len(cpus)] if cpus else None
-            proc = ctx.Process(target=_solo_process, args=(child, cpu, i), daemon=True)
-            proc.start()
-            self.conns.append(parent)
-            self.procs.append(proc)
-        for conn in self.conns:
-            conn.recv()  # warmed up
+        self.conns: list[Connection] = []
+        self.procs: list[multiprocessing.process.BaseProcess] = []
+        try:
+            for i in range(n):
+                parent, child = ctx.Pipe()
+                cpu = cpus[i % len(cpus)] if cpus else None
+                proc = ctx.Process(target=_solo_process, args=(child, cpu, i), daemon=True)
+                proc.start()
+                child.close()  # the child's end is the child's: its death reads as EOF here
+                self.conns.append(parent)
+                self.procs.append(proc)
+            for w in range(n):
+                self._answer(w)  # warmed up
+        except BaseException:
+            self.close()
+            raise
+
+    def _answer(self, w: int) -> Any:
+        try:
+            return self.conns[w].recv()
+        except EOFError:
+            self.procs[w].join(timeout=5)
+            raise RuntimeError(f"the single-env process {w} of the ceiling died (exit code "
+                               f"{self.procs[w].exitcode})") from None
 
     def turn(self, calls: int) -> tuple[float, int]:
         t0 = time.perf_counter()
         for conn in self.conns:
             conn.send(calls)
-        episodes = sum(conn.recv()[1] for conn in self.conns)
+        episodes = sum(self._answer(w)[1] for w in range(len(self.conns)))
         return time.perf_counter() - t0, episodes
 
     def close(self) -> None:
@@ -201,8 +219,8 @@ def interleaved_vector_steps_per_second(makes: dict[str, Callable[[], Any]], ste
     up (``WARMUP_STEPS`` vector steps), then all stepped in turns of about ``CHUNK_STEPS``
     env steps (``CHUNK_STEPS // num_envs`` vector steps) until each has made about
     ``steps``; one's time is the sum of its turns. ``makes`` give a vector env, or a
-    ``_SoloProcessTurns``. Idle vector envs' workers block on their pipes, so a turn has
-    the machine to itself."""
+    ``_SoloProcessTurns``. Idle vector envs' workers sleep on their pipes (waking every
+    ``BOARD_NAP_S``), so a turn has the machine to itself."""
     runners: dict[str, Any] = {}
     try:
         for name, make in makes.items():

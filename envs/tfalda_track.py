@@ -347,7 +347,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         # The renderer and the scene are caches (tens of MB), rebuilt from the rest.
         state = self.__dict__.copy()
         state.update(_renderer=None, _scene=None, _map=None, _prepared_scene=None,
-                     _spare_scene=None)
+                     _spare_scene=None, _prepared_for=None)
         if self._last is not None:  # the full image is re-rendered bit for bit on demand
             state["_last"] = replace(self._last, image=None)
         return state
@@ -442,7 +442,6 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             return False  # prepared already for this state of np_random
         peek = np.random.Generator(copy.deepcopy(self._np_random.bit_generator))
         spec = int(peek.integers(*self.track_seeds))
-        self._prepared_for = state
         prepared = False
         if self._prepared is None or self._prepared[0] != spec:
             track = resolve_track(spec, self.obstacles)
@@ -459,6 +458,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             self._prepared_scene = None  # a build that fails leaves nothing prepared
             self._prepared_scene = (key, self._build_scene(*key, reuse=spare))
             prepared = True
+        self._prepared_for = state  # only now: a failed build is tried again
         return prepared
 
     def _check_reset_options(self, options: object) -> _ResetOptions:
