@@ -70,6 +70,27 @@ def test_bench_ab_runs_two_checkouts_side_by_side() -> None:
         assert all(v > 0 for v in row["ratio"].values())
 
 
+def test_bench_ab_takes_turns_on_one_core() -> None:
+    """``--turns``: this checkout against itself on one core, in turns; every figure of
+    both sides and their ratio (near 1: the same code, the drift on both alike)."""
+    result = run_json("bench_ab.py", "--other", sys.executable, "--turns", "--steps", "330",
+                      "--resets", "12")
+    assert result["steps"] == 330 and result["resets"] == 12 and not result["interrupted"]
+    for side in ("this", "other", "ratio"):
+        assert set(result[side]) == {"fixed_steps_per_s", "generated_steps_per_s",
+                                     "reset_median_ms"}
+        assert all(v > 0 for v in result[side].values())
+    assert result["machine"]["one_core_in_turns"] == min(os.sched_getaffinity(0))
+
+
+def test_bench_ab_refuses_pairs_with_turns() -> None:
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_ab.py"), "--other",
+                           sys.executable, "--turns", "--pairs", "2"], capture_output=True,
+                          text=True, timeout=60, check=False)
+    assert done.returncode == 2 and "contradict" in done.stderr
+    assert "Traceback" not in done.stderr
+
+
 def test_bench_ab_refuses_a_missing_interpreter() -> None:
     done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_ab.py"), "--other",
                            "/nonexistent/python"], capture_output=True, text=True,
