@@ -43,6 +43,11 @@ TURN_STEPS = 300
 TURN_RESETS = 10
 """Resets per turn (``--turns``)."""
 
+FIGURES = (("fixed_steps_per_s", "fixed track [steps/s]"),
+           ("generated_steps_per_s", "generated [steps/s]"),
+           ("reset_median_ms", "reset median [ms]"))
+"""Each checkout's figures: key, label."""
+
 
 def measure(steps: int, resets: int) -> dict[str, float]:
     """This interpreter's figures, on the one core it is pinned to (child process)."""
@@ -170,14 +175,16 @@ def run_turns(other: str, steps: int, resets: int, quiet: bool) -> dict[str, obj
             order = ("this", "other") if turn % 2 == 0 else ("other", "this")
             for figure in ("fixed", "generated"):
                 n = min(TURN_STEPS, steps - done[figure])
-                if n > 0:
+                if n > 0:  # counted once both sides made it (a Ctrl-C may come between)
+                    took = {side: children[side].ask(figure, n)["seconds"] for side in order}
                     for side in order:
-                        seconds[side][figure] += children[side].ask(figure, n)["seconds"]
+                        seconds[side][figure] += took[side]
                     done[figure] += n
             n = min(TURN_RESETS, resets - done["reset"])
             if n > 0:
+                resets_took = {side: children[side].ask("reset", n)["times"] for side in order}
                 for side in order:
-                    times[side] += children[side].ask("reset", n)["times"]
+                    times[side] += resets_took[side]
                 done["reset"] += n
             turn += 1
             if not quiet:
@@ -290,39 +297,36 @@ def main(argv: list[str] | None = None) -> int:
     except RuntimeError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
-    status = 0
-    if result["interrupted"]:
-        print(f"interrupted: {len(result['pairs'])} of {args.pairs} pairs finished; "  # type: ignore[arg-type]
-              "those are reported", file=sys.stderr)
-        status = 130
+    status = _status(result, args.json, f"{len(result['pairs'])} of {args.pairs} pairs "  # type: ignore[arg-type]
+                     "finished")
     if args.json:
-        print(json.dumps(result, indent=2))
         return status
     print(f"machine: {result['machine']['cores']} cores, one process pinned to each; "
           f"other: {args.other}")
     print(f"{'pair':<6}{'figure':<24}{'other':>10}{'this':>10}{'this/other':>12}")
     for row in result["pairs"]:  # type: ignore[union-attr]
-        for key, label in (("fixed_steps_per_s", "fixed track [steps/s]"),
-                           ("generated_steps_per_s", "generated [steps/s]"),
-                           ("reset_median_ms", "reset median [ms]")):
+        for key, label in FIGURES:
             print(f"{row['pair']:<6}{label:<24}{row['other'][key]:>10.2f}"
                   f"{row['this'][key]:>10.2f}{row['ratio'][key]:>12.2f}")
     return status
 
 
-FIGURES = (("fixed_steps_per_s", "fixed track [steps/s]"),
-           ("generated_steps_per_s", "generated [steps/s]"),
-           ("reset_median_ms", "reset median [ms]"))
+def _status(result: dict[str, Any], as_json: bool, finished: str) -> int:
+    """The exit status (130 after a Ctrl-C, which says what was finished); the JSON
+    printed if asked for."""
+    status = 0
+    if result["interrupted"]:
+        print(f"interrupted: {finished}; those are reported", file=sys.stderr)
+        status = 130
+    if as_json:
+        print(json.dumps(result, indent=2))
+    return status
 
 
 def _report_turns(result: dict[str, Any], args: argparse.Namespace) -> int:
-    status = 0
-    if result["interrupted"]:
-        print(f"interrupted after {result['steps']} steps and {result['resets']} resets per "
-              "checkout; those are reported", file=sys.stderr)
-        status = 130
+    status = _status(result, args.json, f"{result['steps']} steps and {result['resets']} "
+                     "resets per checkout finished")
     if args.json:
-        print(json.dumps(result, indent=2))
         return status
     print(f"machine: {result['machine']['cores']} cores; both checkouts on core "
           f"{result['machine']['one_core_in_turns']}, in turns of {TURN_STEPS} steps "
