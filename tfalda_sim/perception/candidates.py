@@ -14,20 +14,24 @@ keeps the listing's initial end x = 0.
 Speed: the pixels of a segment depend only on ``D`` (and the image height), not on the
 start, so for one ``D`` the sums of all starts are a few shifted row additions, which
 vectorise; that is ``W² · H`` additions in SIMD instead of ``W²`` scalar line walks. The
-row additions are padded to whole blocks of ``SIMD_BLOCK`` lanes: LLVM vectorises them
-``SIMD_BLOCK`` int32 at a time and runs shorter rests as scalar code, which most of a
-ROI's rows were (a resampled ROI is 75–90 px wide; the rows of steep ``D`` are shorter).
-The detector's images hold their sums in 16 bits when no segment can exceed them (at most
-``UINT16_MAX_SAMPLES`` samples of 255): twice the lanes per vector, 14 % less time here.
+starts are summed in blocks of ``SIMD_BLOCK`` lanes held in vector registers over all the
+segment's samples (``_block_sums``), reading the samples' offsets from a table built once
+per image height (``segment_steps``): a row addition through memory per sample, with its
+stepped offset, had cost 5× as much. The detector's images hold their sums in 16 bits
+when no segment can exceed them (at most ``UINT16_MAX_SAMPLES`` samples of 255).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 
 import cv2
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from .params import EdgeMode, TfaldaConfig
 
@@ -55,43 +59,95 @@ UINT16_MAX_SAMPLES: int = 65535 // 255
 segment has at most that many samples of at most 255) [px]."""
 
 SIMD_BLOCK: int = 32
-"""Lanes per padded row addition of the candidate search [int32 values]: what LLVM's
-vectoriser takes per iteration here (4 × 8 lanes of AVX2; rests shorter than a block ran
-as scalar code)."""
+"""Starts summed at once by the candidate search, in vector registers [lanes]: one 512-bit
+register of uint16 sums (two of AVX2), four of int32. Row ends are padded to whole blocks
+(the extra lanes read the zeros past the image, are never used)."""
+
+SEGMENT_TABLES_KEPT: int = 16
+"""Segment tables ``segment_steps`` keeps (one per image height and width class; the
+thesis' ROIs use 2–4): bounds their memory whatever the images asked for."""
+
+
+def _make_block_sums(blocks: int):  # type: ignore[no-untyped-def]  # numba's intrinsic
+    """An intrinsic ``(flat, steps, first, n, width, sign, base, out)``: for ``blocks``
+    blocks of ``SIMD_BLOCK`` starts from ``base``, the sums over ``n`` samples of one
+    segment of the pixels at ``flat[base + block·SIMD_BLOCK + y·width + sign·x + lane]``,
+    ``(y, x)`` the samples' rows and column offsets ``steps[first:first + n]``, written to
+    ``out[block·SIMD_BLOCK + lane]``. The sums stay in vector registers over all samples
+    (numba's loops kept them in memory: a load, add and store per lane and sample). No
+    bounds checks: ``search_candidates`` checks its arrays before."""
+
+    @intrinsic
+    def block_sums(typingctx, flat, steps, first, n, width, sign, base, out
+                   ):  # type: ignore[no-untyped-def]
+        if not (isinstance(flat, types.Array) and isinstance(out, types.Array)
+                and flat.dtype == out.dtype and flat.dtype in (types.uint16, types.int32)
+                and isinstance(steps, types.Array) and steps.dtype == types.int32):
+            return None
+        ip = types.intp
+
+        def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+            data = context.make_array(signature.args[0])(context, builder, args[0]).data
+            table = context.make_array(signature.args[1])(context, builder, args[1]).data
+            dest = context.make_array(signature.args[7])(context, builder, args[7]).data
+            first_, n_, width_, sign_, base_ = args[2:7]
+            vector = ir.VectorType(context.get_data_type(signature.args[0].dtype), SIMD_BLOCK)
+            align = signature.args[0].dtype.bitwidth // 8
+            intp = base_.type
+            accs = [cgutils.alloca_once_value(builder, ir.Constant(vector, None))
+                    for _ in range(blocks)]
+            with cgutils.for_range(builder, n_) as loop:
+                k = builder.mul(builder.add(first_, loop.index), ir.Constant(intp, 2))
+                y = builder.sext(builder.load(builder.gep(table, [k])), intp)
+                x = builder.sext(builder.load(builder.gep(
+                    table, [builder.add(k, ir.Constant(intp, 1))])), intp)
+                at = builder.add(base_, builder.add(builder.mul(y, width_),
+                                                    builder.mul(sign_, x)))
+                for b, acc in enumerate(accs):
+                    ptr = builder.gep(data, [builder.add(at, ir.Constant(intp, b * SIMD_BLOCK))])
+                    value = builder.load(builder.bitcast(ptr, vector.as_pointer()), align=align)
+                    builder.store(builder.add(builder.load(acc), value), acc)
+            for b, acc in enumerate(accs):
+                ptr = builder.gep(dest, [ir.Constant(intp, b * SIMD_BLOCK)])
+                builder.store(builder.load(acc), builder.bitcast(ptr, vector.as_pointer()),
+                              align=align)
+            return context.get_dummy_value()
+
+        return types.void(flat, steps, ip, ip, ip, ip, ip, out), codegen
+
+    return block_sums
+
+
+_block_sums_1 = _make_block_sums(1)
+_block_sums_2 = _make_block_sums(2)
+_block_sums_3 = _make_block_sums(3)
 
 
 @njit(cache=True, error_model="numpy")
-def search_candidates(flat: np.ndarray, height: int, width: int, best_i: np.ndarray,
-                      best_end: np.ndarray, sums: np.ndarray) -> None:
-    """For every start x of the top row of an image (``flat``: its ``height`` × ``width``
-    pixels row by row, int32 — or uint16 if no segment sum can exceed 16 bits
-    (``UINT16_MAX_SAMPLES``): twice the lanes per vector — followed by at least
-    ``SIMD_BLOCK`` padding values): the largest segment sum over all end x of the bottom
-    row (``best_i``, int32) and that end x (``best_end``, int32); ``sums`` is scratch of
-    ``flat``'s type, of length ≥ width + ``SIMD_BLOCK``.
-    (int32 pixels and slices of the flat array keep the inner loops plain vector
-    additions; each row addition runs over whole blocks, its extra lanes are never read.)"""
-    w = width
-    block = SIMD_BLOCK
-    for x in range(w):
-        best_i[x] = 0
-        best_end[x] = 0
+def build_segment_steps(height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """The samples of every segment of an image ``height`` rows high, for every
+    ``|D|`` < ``width``: ``(steps, first)``, ``steps`` int32 ``(total, 2)`` rows of
+    (row, column offset ≥ 0), the segment of ``|D|`` = d at ``steps[first[d]:first[d + 1]]``
+    (``first`` int64, ``width + 1`` entries). Sample i sits at
+    ``round(i·|D|/(n−1)), round(i·(height − 1)/(n−1))`` (halves away from zero), stepped with
+    remainders instead of two integer divisions per sample; a negative ``D`` mirrors the
+    column offsets."""
     dy = height - 1
-    for dx in range(-(w - 1), w):  # ascending end x for every start
-        adx = abs(dx)
+    first = np.empty(width + 1, np.int64)
+    total = 0
+    for adx in range(width):
+        first[adx] = total
+        total += max(adx, dy) + 1
+    first[width] = total
+    steps = np.empty((total, 2), np.int32)
+    for adx in range(width):
         n = max(adx, dy) + 1
-        lo = max(0, -dx)
-        m = min(w, w - dx) - lo
-        padded = (m + block - 1) // block * block
-        acc = sums[:padded]
-        acc[:] = 0
-        # Sample i sits at round(i·adx/(n−1)), round(i·dy/(n−1)) (halves away from zero),
-        # stepped with remainders instead of two integer divisions per sample.
         den = 2 * (n - 1)
         ox = 0
         y = 0
         rx = n - 1
         ry = n - 1
+        at = first[adx]
         for i in range(n):
             if i > 0:
                 rx += 2 * adx
@@ -102,14 +158,80 @@ def search_candidates(flat: np.ndarray, height: int, width: int, best_i: np.ndar
                 if ry >= den:
                     ry -= den
                     y += 1
-            start = y * w + (lo + ox if dx >= 0 else lo - ox)
-            seg = flat[start:start + padded]
-            for k in range(padded):
-                acc[k] += seg[k]
+            steps[at + i, 0] = y
+            steps[at + i, 1] = ox
+    return steps, first
+
+
+def segment_steps(height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """``build_segment_steps`` for images ``height`` × ``width`` [px], read-only and kept
+    (``SEGMENT_TABLES_KEPT``): a table serves every width up to its own, which is rounded
+    up to a power of two (at least 128), so a detector's ROIs of changing widths share one
+    table per height."""
+    if height < 1 or width < 1:
+        raise ValueError(f"a gradient image of {height} × {width} px: both must be ≥ 1")
+    return _segment_steps(int(height), max(128, 1 << (int(width) - 1).bit_length()))
+
+
+@functools.lru_cache(maxsize=SEGMENT_TABLES_KEPT)
+def _segment_steps(height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+    steps, first = build_segment_steps(height, width)
+    steps.flags.writeable = False
+    first.flags.writeable = False
+    return steps, first
+
+
+@njit(cache=True, error_model="numpy")
+def search_candidates(flat: np.ndarray, height: int, width: int,
+                      segments: tuple[np.ndarray, np.ndarray], best_i: np.ndarray,
+                      best_end: np.ndarray, sums: np.ndarray) -> None:
+    """For every start x of the top row of an image (``flat``: its ``height`` × ``width``
+    pixels row by row, int32 — or uint16 if no segment sum can exceed 16 bits
+    (``UINT16_MAX_SAMPLES``) — followed by at least ``SIMD_BLOCK`` padding values): the
+    largest segment sum over all end x of the bottom row (``best_i``, int32) and that end x
+    (``best_end``, int32). ``segments`` is ``segment_steps(height, width)``; ``sums`` is
+    scratch of ``flat``'s type, of length ≥ width + ``SIMD_BLOCK``. Arrays too short for
+    these raise ValueError (the block sums read and write without bounds checks)."""
+    steps, first = segments
+    w = width
+    if height < 1 or w < 1:
+        raise ValueError("search_candidates: height and width must be ≥ 1")
+    if flat.shape[0] < height * w + SIMD_BLOCK or sums.shape[0] < w + SIMD_BLOCK \
+            or best_i.shape[0] < w or best_end.shape[0] < w:
+        raise ValueError("search_candidates: flat needs height·width + SIMD_BLOCK values, "
+                         "sums width + SIMD_BLOCK, best_i and best_end width")
+    if first.shape[0] < w + 1 or first[1] - first[0] != height \
+            or steps.shape[0] < first[w] or steps.shape[1] != 2:
+        raise ValueError("search_candidates: segments are not segment_steps(height, width)")
+    block = SIMD_BLOCK
+    for x in range(w):
+        best_i[x] = 0
+        best_end[x] = 0
+    dy = height - 1
+    for dx in range(-(w - 1), w):  # ascending end x for every start
+        adx = abs(dx)
+        n = max(adx, dy) + 1
+        lo = max(0, -dx)
+        m = min(w, w - dx) - lo
+        sign = 1 if dx >= 0 else -1
+        at = first[adx]
+        done = 0
+        left = (m + block - 1) // block
+        while left > 0:  # up to 3 blocks (96 starts) at once: the thesis' ROIs in one go
+            if left >= 3:
+                _block_sums_3(flat, steps, at, n, w, sign, lo + done, sums[done:])
+                done += 3 * block
+                left -= 3
+            elif left == 2:
+                _block_sums_2(flat, steps, at, n, w, sign, lo + done, sums[done:])
+                left = 0
+            else:
+                _block_sums_1(flat, steps, at, n, w, sign, lo + done, sums[done:])
+                left = 0
         for k in range(m):  # branch-free update: vectorises
             x = lo + k
-            gt = np.int32(acc[k] > best_i[x])
-            best_i[x] = best_i[x] + gt * (acc[k] - best_i[x])
+            gt = np.int32(sums[k] > best_i[x])
+            best_i[x] = best_i[x] + gt * (sums[k] - best_i[x])
             best_end[x] = best_end[x] + gt * (x + dx - best_end[x])
 
 
@@ -159,7 +281,8 @@ def candidates(gradient: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     best_end = np.empty(w, np.int32)
     flat = np.zeros(h * w + SIMD_BLOCK, np.int32)  # the padding the blocks read past the end
     flat[:h * w] = gradient.ravel()
-    search_candidates(flat, h, w, best_i, best_end, np.empty(w + SIMD_BLOCK, np.int32))
+    search_candidates(flat, h, w, segment_steps(h, w), best_i, best_end,
+                      np.empty(w + SIMD_BLOCK, np.int32))
     p = np.arange(w, dtype=np.int64)
     return p, best_end.astype(np.int64) - p, best_i.astype(np.int64)
 
@@ -215,14 +338,16 @@ def _sobel_at(top: np.ndarray, mid: np.ndarray, bottom: np.ndarray, c0: int, c: 
 
 
 @njit(cache=True, error_model="numpy")
-def _pick(flat: np.ndarray, h: int, w: int, roi_x: float, scale_x: float, first: bool,
-          previous_p_px: float, previous_d_px: float, previous_i: float, kp: float,
-          kd: float, ki: float) -> tuple[float, float, float, float]:
+def _pick(flat: np.ndarray, h: int, w: int, segments: tuple[np.ndarray, np.ndarray],
+          roi_x: float, scale_x: float, first: bool, previous_p_px: float,
+          previous_d_px: float, previous_i: float, kp: float, kd: float, ki: float
+          ) -> tuple[float, float, float, float]:
     """``choose_lane`` on the gradient image held in ``flat`` (``search_candidates``'
     layout)."""
     best_i = np.empty(w, np.int32)
     best_end = np.empty(w, np.int32)
-    search_candidates(flat, h, w, best_i, best_end, np.empty(w + SIMD_BLOCK, flat.dtype))
+    search_candidates(flat, h, w, segments, best_i, best_end,
+                      np.empty(w + SIMD_BLOCK, flat.dtype))
     k = 0
     lam = math.nan
     if first:
@@ -260,19 +385,21 @@ def choose_lane(gradient: np.ndarray, roi_x: float, scale_x: float, first: bool,
     for r in range(h):
         for c in range(w):
             flat[r * w + c] = gradient[r, c]
-    return _pick(flat, h, w, roi_x, scale_x, first, previous_p_px, previous_d_px,
-                 previous_i, kp, kd, ki)
+    return _pick(flat, h, w, build_segment_steps(h, w), roi_x, scale_x, first,
+                 previous_p_px, previous_d_px, previous_i, kp, kd, ki)
 
 
 @njit(cache=True, error_model="numpy")
-def find_lane(small: np.ndarray, horizontal_edges: bool, rising: bool, roi_x: float,
-              scale_x: float, first: bool, previous_p_px: float, previous_d_px: float,
-              previous_i: float, kp: float, kd: float, ki: float
-              ) -> tuple[float, float, float, float]:
+def find_lane(small: np.ndarray, segments: tuple[np.ndarray, np.ndarray],
+              horizontal_edges: bool, rising: bool, roi_x: float, scale_x: float,
+              first: bool, previous_p_px: float, previous_d_px: float, previous_i: float,
+              kp: float, kd: float, ki: float) -> tuple[float, float, float, float]:
     """``choose_lane`` of the Sobel (``sobel_into``) of the resampled crop ``small``: the
-    detector's per-ROI kernel, one call after the resize."""
+    detector's per-ROI kernel, one call after the resize; ``segments`` is
+    ``segment_steps(*small.shape)``."""
     h, w = small.shape
-    args = (roi_x, scale_x, first, previous_p_px, previous_d_px, previous_i, kp, kd, ki)
+    args = (segments, roi_x, scale_x, first, previous_p_px, previous_d_px, previous_i, kp,
+            kd, ki)
     if max(h, w) <= UINT16_MAX_SAMPLES:  # every segment sum fits 16 bits
         flat16 = np.zeros(h * w + SIMD_BLOCK, np.uint16)
         sobel_into(small, horizontal_edges, rising, flat16)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .candidates import find_lane, resample, sobel_horizontal_edges
+from .candidates import find_lane, resample, segment_steps, sobel_horizontal_edges
 from .lis import LaneInferenceSystem, LisResult, Rows
 from .params import DetectorConfig, EdgeMode
 from .rois import (
@@ -246,8 +246,9 @@ class TfaldaDetector:
         if lambda_scale != 1.0:
             kp, kd = kp / lambda_scale, kd / lambda_scale
         p, d, i, lam = find_lane(
-            small, horizontal, tcfg.edge_mode is EdgeMode.RISING, float(roi.x),
-            roi.width / small.shape[1], prev is None,
+            small, segment_steps(*small.shape), horizontal,
+            tcfg.edge_mode is EdgeMode.RISING, float(roi.x), roi.width / small.shape[1],
+            prev is None,
             *((prev.p, prev.d, prev.i) if prev is not None else (0.0, 0.0, 0.0)),
             kp, kd, tcfg.ki)
         return LaneSegment(p, d, i, float(roi.y), float(roi.y + height), lam)

@@ -9,6 +9,7 @@ import pytest
 
 from tfalda_sim.perception import TfaldaConfig
 from tfalda_sim.perception.candidates import (
+    UINT16_MAX_SAMPLES,
     candidates,
     choose_lane,
     distance_lambda,
@@ -65,17 +66,90 @@ def test_kernel_equals_the_plain_reference(seed: int) -> None:
     assert i.tolist() == ri
     # The 16-bit variant (images whose sums fit: the detector's) is the same kernel.
     assert _search(img, np.uint16) == (rd, ri)
+    assert _numpy_candidates(img) == (rd, ri)  # the wide images' reference, checked here
+
+
+def _numpy_candidates(img: np.ndarray) -> tuple[list[int], list[int]]:
+    """(D, I) per start x by numpy fancy indexing, one end offset at a time (the samples'
+    integer rounding written out again): a reference fast enough for wide images."""
+    h, w = img.shape
+    best_i, best_end = np.zeros(w, np.int64), np.zeros(w, np.int64)
+    for dx in range(-(w - 1), w):  # ascending end x for every start
+        n = max(abs(dx), h - 1) + 1
+        i = np.arange(n)
+        den = max(2 * (n - 1), 1)
+        ox = np.sign(dx) * ((2 * i * abs(dx) + n - 1) // den)
+        y = (2 * i * (h - 1) + n - 1) // den
+        starts = np.arange(max(0, -dx), min(w, w - dx))
+        sums = img[y[None, :], starts[:, None] + ox[None, :]].astype(np.int64).sum(axis=1)
+        better = sums > best_i[starts]
+        best_i[starts[better]] = sums[better]
+        best_end[starts[better]] = starts[better] + dx
+    return (best_end - np.arange(w)).tolist(), best_i.tolist()
+
+
+@pytest.mark.parametrize("width", [31, 32, 33, 64, 65, 96, 97, 128, 129, 200, 300])
+def test_wide_images_sum_in_every_block_combination(width: int) -> None:
+    """Images from one to ten blocks of starts wide (the search sums 1, 2 or 3 blocks of
+    ``SIMD_BLOCK`` starts at once): equal to the numpy reference in both sum types, on a
+    table kept for a wider image of the same height."""
+    rng = np.random.default_rng(width)
+    for h in (1, 2, 9, 42):
+        img = rng.integers(0, 256, (h, width), dtype=np.uint8)
+        img[rng.random(img.shape) < 0.5] = 0
+        want = _numpy_candidates(img)
+        assert _search(img, np.int32) == want
+        if max(h, width) <= UINT16_MAX_SAMPLES:  # the sums fit 16 bits
+            assert _search(img, np.uint16) == want
+
+
+def test_segment_tables_are_kept_per_height_bounded_and_read_only() -> None:
+    from tfalda_sim.perception.candidates import (
+        SEGMENT_TABLES_KEPT,
+        _segment_steps,
+        build_segment_steps,
+        segment_steps,
+    )
+
+    steps, first = segment_steps(42, 90)
+    assert segment_steps(42, 75)[0] is steps  # one table for the ROIs' changing widths
+    assert not steps.flags.writeable and not first.flags.writeable
+    want_steps, want_first = build_segment_steps(42, 90)
+    assert (first[:91] == want_first).all() and (steps[:want_first[-1]] == want_steps).all()
+    for h in range(1, 3 * SEGMENT_TABLES_KEPT):
+        segment_steps(h, 10)
+    assert _segment_steps.cache_info().currsize == SEGMENT_TABLES_KEPT
+    with pytest.raises(ValueError, match="≥ 1"):
+        segment_steps(0, 5)
+
+
+def test_the_search_refuses_arrays_it_would_read_or_write_past() -> None:
+    """The block sums have no bounds checks of their own: the search checks first."""
+    from tfalda_sim.perception.candidates import SIMD_BLOCK, search_candidates, segment_steps
+
+    h, w = 5, 40
+    ok = (np.zeros(h * w + SIMD_BLOCK, np.int32), h, w, segment_steps(h, w),
+          np.empty(w, np.int32), np.empty(w, np.int32), np.empty(w + SIMD_BLOCK, np.int32))
+    search_candidates(*ok)
+    bad = {0: np.zeros(h * w, np.int32), 3: segment_steps(h + 1, w),
+           6: np.empty(w, np.int32), 4: np.empty(w - 1, np.int32)}
+    for k, value in bad.items():
+        args = list(ok)
+        args[k] = value
+        with pytest.raises(ValueError, match="search_candidates"):
+            search_candidates(*args)
 
 
 def _search(img: np.ndarray, dtype: type) -> tuple[list[int], list[int]]:
     """``search_candidates`` on ``img`` held as ``dtype``: (D, I) per start x."""
-    from tfalda_sim.perception.candidates import SIMD_BLOCK, search_candidates
+    from tfalda_sim.perception.candidates import SIMD_BLOCK, search_candidates, segment_steps
 
     h, w = img.shape
     flat = np.zeros(h * w + SIMD_BLOCK, dtype)
     flat[:h * w] = img.ravel()
     best_i, best_end = np.empty(w, np.int32), np.empty(w, np.int32)
-    search_candidates(flat, h, w, best_i, best_end, np.empty(w + SIMD_BLOCK, dtype))
+    search_candidates(flat, h, w, segment_steps(h, w), best_i, best_end,
+                      np.empty(w + SIMD_BLOCK, dtype))
     return (best_end - np.arange(w)).tolist(), best_i.tolist()
 
 
@@ -83,7 +157,7 @@ def test_the_16_bit_search_holds_the_largest_sums_it_is_used_for() -> None:
     """An all-white image as wide as the 16-bit search goes: its longest segments sum to
     65535 exactly, as the 32-bit search finds; one pixel wider, the detector's kernel
     switches to 32 bits and still equals the reference path."""
-    from tfalda_sim.perception.candidates import UINT16_MAX_SAMPLES, find_lane
+    from tfalda_sim.perception.candidates import find_lane, segment_steps
 
     white = np.full((2, UINT16_MAX_SAMPLES), 255, np.uint8)
     d16, i16 = _search(white, np.uint16)
@@ -96,7 +170,8 @@ def test_the_16_bit_search_holds_the_largest_sums_it_is_used_for() -> None:
                           False)
     assert _search(gradient, np.uint16) != _search(gradient, np.int32)  # 16 bits overflow
     args = (0.0, 1.0, True, 0.0, 0.0, 0.0, 1.0, 1.0, 0.01)
-    np.testing.assert_equal(find_lane(wider, False, False, *args), choose_lane(gradient, *args))
+    np.testing.assert_equal(find_lane(wider, segment_steps(*wider.shape), False, False, *args),
+                            choose_lane(gradient, *args))
 
 
 def test_all_dark_candidates_keep_the_listing_end_x_0() -> None:
@@ -176,7 +251,7 @@ def test_detector_sobel_equals_opencv_and_its_lane_the_reference(seed: int) -> N
     """The detector's per-ROI kernel (``find_lane``: Sobel in numba, then the search) gives
     OpenCV's Sobel of the resampled crop (``preprocess``) bit for bit, in both directions
     and edge modes, down to 1 px wide images, and so the lane ``choose_lane`` picks."""
-    from tfalda_sim.perception.candidates import find_lane, resample, sobel_into
+    from tfalda_sim.perception.candidates import find_lane, resample, segment_steps, sobel_into
 
     rng = np.random.default_rng(seed)
     h, w = int(rng.integers(2, 40)), int(rng.integers(1, 90))
@@ -197,5 +272,6 @@ def test_detector_sobel_equals_opencv_and_its_lane_the_reference(seed: int) -> N
             args = (float(rng.integers(0, 600)), 2 * w / small.shape[1], bool(seed % 3),
                     300.0, 10.0, 800.0, 1.0, 2.0, 0.01)
             np.testing.assert_equal(  # exact, NaN (first frame's λ) equal to NaN
-                find_lane(small, horizontal, mode is EdgeMode.RISING, *args),
+                find_lane(small, segment_steps(*small.shape), horizontal,
+                          mode is EdgeMode.RISING, *args),
                 choose_lane(want, *args))
