@@ -1,17 +1,22 @@
-"""Benchmark of TFALDA's candidate search against its previous implementation, one core.
+"""Benchmark of TFALDA's candidate search against its previous implementations, one core.
 
     python benchmarks/bench_candidates.py [--rois 400] [--repeat 20] [--json]
 
 The ROIs of rendered frames (the thesis' four, along the right lane of the oval and two
-generated tracks) are pre-processed as the detector does (resample, Sobel); then both
-kernels search the same gradient images: the current ``search_candidates`` (row additions
-padded to whole SIMD blocks) on int32 images, the same on uint16 images (what the detector
-runs when every sum fits 16 bits, as for the thesis' ROIs: twice the lanes per vector) and
-the previous one (issue 4's, kept below as the same-run reference: unpadded rows whose
-rests ran as scalar code). All must give the same candidates. Reported: µs per ROI, the
-ratios old/new, and the work against one core's SIMD:
-the useful int32 additions ``Σ n·m`` (n samples of m starts per end offset), the ones
-executed with padding, and the additions per ns that makes.
+generated tracks) are pre-processed as the detector does (resample, Sobel); then every
+kernel searches the same gradient images, on int32 images and on uint16 ones (what the
+detector runs when every sum fits 16 bits, as for the thesis' ROIs):
+
+- the current ``search_candidates``: blocks of ``SIMD_BLOCK`` starts summed in vector
+  registers over a segment's samples, offsets from a table per image height;
+- the previous one (issue 18's fifth session, kept below as the same-run reference): a
+  row addition through memory per sample, padded to whole blocks, with a DDA step;
+- issue 4's (kept below): unpadded row additions whose rests ran as scalar code.
+
+All must give the same candidates. Reported: µs per ROI, the ratios to the current
+kernel, and the work against one core's SIMD: the useful int32 additions ``Σ n·m``
+(n samples of m starts per end offset), the ones executed with padding, and the
+additions per ns that makes.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ from tfalda_sim.perception.candidates import (
     UINT16_MAX_SAMPLES,
     preprocess,
     search_candidates,
+    segment_steps,
 )
 from tfalda_sim.perception.rois import initial_rois, windows
 from tfalda_sim.rendering import Effects, Renderer, build_scene
@@ -80,6 +86,51 @@ def previous_search_candidates(flat: np.ndarray, height: int, width: int,
             best_end[x] = best_end[x] + gt * (x + dx - best_end[x])
 
 
+@njit(cache=True, error_model="numpy")
+def row_search_candidates(flat: np.ndarray, height: int, width: int, best_i: np.ndarray,
+                          best_end: np.ndarray, sums: np.ndarray) -> None:
+    """The candidate search of issue 18's fifth session (commit b819aa8), unchanged: each
+    sample a row addition through memory, padded to whole ``SIMD_BLOCK`` blocks."""
+    w = width
+    block = SIMD_BLOCK
+    for x in range(w):
+        best_i[x] = 0
+        best_end[x] = 0
+    dy = height - 1
+    for dx in range(-(w - 1), w):
+        adx = abs(dx)
+        n = max(adx, dy) + 1
+        lo = max(0, -dx)
+        m = min(w, w - dx) - lo
+        padded = (m + block - 1) // block * block
+        acc = sums[:padded]
+        acc[:] = 0
+        den = 2 * (n - 1)
+        ox = 0
+        y = 0
+        rx = n - 1
+        ry = n - 1
+        for i in range(n):
+            if i > 0:
+                rx += 2 * adx
+                if rx >= den:
+                    rx -= den
+                    ox += 1
+                ry += 2 * dy
+                if ry >= den:
+                    ry -= den
+                    y += 1
+            start = y * w + (lo + ox if dx >= 0 else lo - ox)
+            seg = flat[start:start + padded]
+            for k in range(padded):
+                acc[k] += seg[k]
+        for k in range(m):
+            x = lo + k
+            gt = np.int32(acc[k] > best_i[x])
+            best_i[x] = best_i[x] + gt * (acc[k] - best_i[x])
+            best_end[x] = best_end[x] + gt * (x + dx - best_end[x])
+
+
 def additions(height: int, width: int) -> tuple[int, int]:
     """(useful, executed) int32 additions of one search on a height × width image."""
     useful = executed = 0
@@ -109,9 +160,20 @@ def gradients(n: int) -> list[np.ndarray]:
     return out[:n]
 
 
+KERNELS: tuple[tuple[str, str, str], ...] = (
+    ("issue_4", "issue 4's (reference)", "int32"),
+    ("previous", "previous (rows through memory)", "int32"),
+    ("previous_uint16", "previous, uint16", "uint16"),
+    ("current", "current (register blocks)", "int32"),
+    ("current_uint16", "current, uint16 (the detector)", "uint16"),
+)
+"""(key, label, image type) of the kernels timed, in the table's order."""
+
+
 def run(n: int, repeat: int) -> dict[str, object]:
     pin_to_one_core()
     grads = gradients(n)
+
     def padded(dtype: type) -> list[tuple[np.ndarray, int, int, np.ndarray, np.ndarray]]:
         """(flat padded image of ``dtype``, height, width, best_i, best_end) per ROI."""
         out = []
@@ -122,43 +184,58 @@ def run(n: int, repeat: int) -> dict[str, object]:
             out.append((flat, h, w, np.empty(w, np.int32), np.empty(w, np.int32)))
         return out
 
-    inputs = padded(np.int32)
-    inputs16 = padded(np.uint16)
-    assert max(max(h, w) for _, h, w, _, _ in inputs16) <= UINT16_MAX_SAMPLES
+    inputs = {"int32": padded(np.int32), "uint16": padded(np.uint16)}
+    assert max(max(h, w) for _, h, w, _, _ in inputs["uint16"]) <= UINT16_MAX_SAMPLES
+    tables = {(h, w): segment_steps(h, w) for _, h, w, _, _ in inputs["int32"]}
+    kernels = {"issue_4": previous_search_candidates, "previous": row_search_candidates,
+               "previous_uint16": row_search_candidates}
 
-    def time_kernel(kernel, inputs=inputs, dtype=np.int32
+    def current(flat: np.ndarray, h: int, w: int, bi: np.ndarray, be: np.ndarray,
+                scratch: np.ndarray) -> None:
+        search_candidates(flat, h, w, tables[h, w], bi, be, scratch)
+
+    kernels["current"] = kernels["current_uint16"] = current
+
+    def time_kernel(key: str, dtype: str
                     ) -> tuple[float, list[tuple[np.ndarray, np.ndarray]]]:
         """Best time per ROI over ``repeat`` passes, and the results."""
-        scratch = np.empty(max(w for _, _, w, _, _ in inputs) + SIMD_BLOCK, dtype)
-        for flat, h, w, bi, be in inputs:  # warm-up (JIT)
+        kernel, rois = kernels[key], inputs[dtype]
+        scratch = np.empty(max(w for _, _, w, _, _ in rois) + SIMD_BLOCK, dtype)
+        for flat, h, w, bi, be in rois:  # warm-up (JIT)
             kernel(flat, h, w, bi, be, scratch)
         best = np.inf
         for _ in range(repeat):
             t0 = time.perf_counter()
-            for flat, h, w, bi, be in inputs:
+            for flat, h, w, bi, be in rois:
                 kernel(flat, h, w, bi, be, scratch)
             best = min(best, time.perf_counter() - t0)
-        return best / len(inputs), [(bi.copy(), be.copy()) for *_, bi, be in inputs]
+        return best / len(rois), [(bi.copy(), be.copy()) for *_, bi, be in rois]
 
-    t_old, r_old = time_kernel(previous_search_candidates)
-    t_new, r_new = time_kernel(search_candidates)
-    t_16, r_16 = time_kernel(search_candidates, inputs16, np.uint16)
+    times, results = {}, {}
+    for key, _, dtype in KERNELS:
+        times[key], results[key] = time_kernel(key, dtype)
+    reference = results["issue_4"]
     same = all(np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
-               for new in (r_new, r_16) for a, b in zip(new, r_old, strict=True))
-    useful = sum(additions(h, w)[0] for _, h, w, _, _ in inputs) / len(inputs)
-    executed = sum(additions(h, w)[1] for _, h, w, _, _ in inputs) / len(inputs)
-    sizes = sorted({(h, w) for _, h, w, _, _ in inputs})
-    return {"machine": machine(), "rois": len(inputs), "repeat": repeat,
+               for r in results.values() for a, b in zip(r, reference, strict=True))
+    rois = inputs["int32"]
+    useful = sum(additions(h, w)[0] for _, h, w, _, _ in rois) / len(rois)
+    executed = sum(additions(h, w)[1] for _, h, w, _, _ in rois) / len(rois)
+    sizes = sorted({(h, w) for _, h, w, _, _ in rois})
+    return {"machine": machine(), "rois": len(rois), "repeat": repeat,
             "roi_sizes_resampled": [list(s) for s in sizes],
             "identical_results": same,
-            "previous_us_per_roi": t_old * 1e6, "current_us_per_roi": t_new * 1e6,
-            "current_uint16_us_per_roi": t_16 * 1e6,
-            "speed_up": t_old / t_new, "speed_up_uint16": t_old / t_16,
-            "useful_additions_per_roi": useful, "executed_additions_per_roi": executed,
-            "useful_additions_per_ns_previous": useful / (t_old * 1e9),
-            "useful_additions_per_ns_current": useful / (t_new * 1e9),
-            "useful_additions_per_ns_uint16": useful / (t_16 * 1e9),
-            "executed_additions_per_ns_current": executed / (t_new * 1e9)}
+            "kernels": {key: {"label": label, "image_type": dtype,
+                              "us_per_roi": times[key] * 1e6,
+                              "useful_additions_per_ns": useful / (times[key] * 1e9),
+                              "executed_additions_per_ns": executed / (times[key] * 1e9),
+                              "time_over_current": times[key] / times[
+                                  "current_uint16" if dtype == "uint16" else "current"]}
+                        for key, label, dtype in KERNELS},
+            "speed_up_over_previous": times["previous"] / times["current"],
+            "speed_up_over_previous_uint16": times["previous_uint16"]
+            / times["current_uint16"],
+            "speed_up_over_issue_4": times["issue_4"] / times["current"],
+            "useful_additions_per_roi": useful, "executed_additions_per_roi": executed}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -176,18 +253,17 @@ def main(argv: list[str] | None = None) -> int:
     m = r["machine"]
     print(f"machine: {m['cores']} cores, pinned to one; {r['rois']} ROIs, resampled sizes "
           f"(h, w) {r['roi_sizes_resampled'][0]}…{r['roi_sizes_resampled'][-1]}")
-    print(f"{'kernel':<34}{'µs/ROI':>9}{'adds/ns':>9}")
-    print(f"{'previous (issue 4, reference)':<34}{r['previous_us_per_roi']:>9.1f}"
-          f"{r['useful_additions_per_ns_previous']:>9.2f}")
-    print(f"{'current (padded SIMD blocks)':<34}{r['current_us_per_roi']:>9.1f}"
-          f"{r['useful_additions_per_ns_current']:>9.2f}")
-    print(f"{'current, uint16 (the detector)':<34}{r['current_uint16_us_per_roi']:>9.1f}"
-          f"{r['useful_additions_per_ns_uint16']:>9.2f}")
-    print(f"speed-up {r['speed_up']:.2f}× (uint16 {r['speed_up_uint16']:.2f}×), results "
-          f"identical: {r['identical_results']}")
+    print(f"{'kernel':<34}{'µs/ROI':>9}{'adds/ns':>9}{'× current':>11}")
+    for k in r["kernels"].values():
+        print(f"{k['label']:<34}{k['us_per_roi']:>9.1f}{k['useful_additions_per_ns']:>9.2f}"
+              f"{k['time_over_current']:>11.2f}")
+    print(f"speed-up over the previous kernel {r['speed_up_over_previous']:.2f}× (uint16 "
+          f"{r['speed_up_over_previous_uint16']:.2f}×), over issue 4's "
+          f"{r['speed_up_over_issue_4']:.2f}×; results identical: {r['identical_results']}")
     print(f"additions per ROI: {r['useful_additions_per_roi']:.0f} useful, "
           f"{r['executed_additions_per_roi']:.0f} executed with padding "
-          f"({r['executed_additions_per_ns_current']:.2f} per ns)")
+          f"({r['kernels']['current_uint16']['executed_additions_per_ns']:.2f} per ns, "
+          f"uint16)")
     return 0 if r["identical_results"] else 1
 
 

@@ -43,6 +43,10 @@ def test_bench_candidates_finds_the_kernels_identical() -> None:
     assert result["identical_results"] is True
     assert result["rois"] == 24
     assert result["executed_additions_per_roi"] >= result["useful_additions_per_roi"] > 0
+    assert set(result["kernels"]) == {"issue_4", "previous", "previous_uint16", "current",
+                                      "current_uint16"}
+    assert result["kernels"]["current"]["time_over_current"] == 1.0
+    assert result["speed_up_over_previous"] > 0
 
 
 def test_bench_reset_times_lazy_eager_and_fixed_track_resets() -> None:
