@@ -12,7 +12,6 @@ same tracks at several speeds (the speed sweep of docs/agents.md).
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -32,7 +31,7 @@ def run_job(job: Job) -> dict[str, Any]:
     """One run (agent, policy, seed, laps, speed, camera): the picklable top-level
     function every backend runs; its result is its JSON record."""
     kind, policy, seed, laps, speed, camera_spec = job
-    track = replace(generate(seed), obstacles=())  # lane keeping: no cartons to avoid
+    track = generate(seed).with_elements(obstacles=())  # lane keeping: no cartons to avoid
     camera = load_camera(camera_spec)
     result = drive(make_agent(kind, policy, camera), track, laps=laps, speed_m_s=speed,
                    recover=False, label=f"seed {seed}", camera=camera)

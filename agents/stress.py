@@ -118,12 +118,12 @@ class StressRun:
 def _track_for(seed: int, fault: str, s_onset: float) -> Track:
     """The track of a run: the generated one; for ``obstacle`` with a carton standing on
     the left lane near the centre line 1.2 m ahead of the onset, hiding that line."""
-    track = replace(generate(seed), obstacles=())
+    track = generate(seed).with_elements(obstacles=())
     if fault == "obstacle":
         s = (s_onset + 1.2) % track.length_m
         carton = Obstacle(s_m=s, lane=Lane.LEFT, length_m=0.3, width_m=0.2, height_m=0.2,
                           offset_m=-0.08)
-        track = replace(track, obstacles=(carton,))
+        track = track.with_elements(obstacles=(carton,))
     return track
 
 
@@ -132,7 +132,7 @@ def run_one(seed: int, fault: str, roi_reset_stage: bool, camera: str = "thesis"
     """One closed-loop drive with ``fault`` on generated track ``seed`` by a car with
     ``camera`` (a profile name or file)."""
     case = FAULTS[fault]
-    base = replace(generate(seed), obstacles=())
+    base = generate(seed).with_elements(obstacles=())
     speed = FAST_CURVE_SPEED_M_S if fault == "fast_curve" else SPEED_M_S
     start_s = base.start_line_s_m or 0.0
     if fault == "fast_curve":

@@ -131,7 +131,7 @@ def resolve_track(spec: TrackSpec, obstacles: bool) -> Track:
         if spec < 0:
             raise ValueError(f"track seeds are ≥ 0, got {show(spec)}; use {accepted}")
         track = generate(int(spec), GeneratorParams())
-        return track if obstacles else replace(track, obstacles=())
+        return track if obstacles else track.with_elements(obstacles=())
     raise TypeError(f"track must be {accepted}, got {show(spec)}")
 
 

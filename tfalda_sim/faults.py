@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 from typing import Protocol
 
 import numpy as np
@@ -196,7 +196,7 @@ def with_gaps(track: Track, faults: Sequence[Fault]) -> Track:
     rasteriser wraps a gap over the start of a closed track)."""
     gaps = tuple(Gap(line, f.s_m % track.length_m if track.closed else f.s_m, f.length_m)
                  for f in faults if isinstance(f, MarkingGap) for line in f.lines)
-    return replace(track, gaps=track.gaps + gaps) if gaps else track
+    return track.with_elements(gaps=track.gaps + gaps) if gaps else track
 
 
 def apply_image_faults(crops: list[np.ndarray], windows: Sequence[tuple[int, int, int, int]],

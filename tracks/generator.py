@@ -241,7 +241,7 @@ def _assemble(poly: _Polygon, fil: tuple[list[Straight | Arc], list[int], np.nda
         u = ((poly.crossing[0] - table.x0[j]) * math.cos(table.h0[j])
              + (poly.crossing[1] - table.y0[j]) * math.sin(table.h0[j]))
         passes.append(float(table.s0[j] + u))
-    return replace(track, intersections=(Intersection(min(passes), max(passes)),))
+    return track.with_elements(intersections=(Intersection(min(passes), max(passes)),))
 
 
 def _free_interval(rng: np.random.Generator, track: Track, length: float,
@@ -305,8 +305,8 @@ def _add_elements(track: Track, rng: np.random.Generator, p: GeneratorParams) ->
         if s is not None:
             obstacles.append(Obstacle((s + 0.5 * length) % total, lane, length, width, height,
                                       offset))
-    return replace(track, gaps=tuple(sorted(gaps, key=lambda g: g.s_m)),
-                   obstacles=tuple(sorted(obstacles, key=lambda o: o.s_m)))
+    return track.with_elements(gaps=tuple(sorted(gaps, key=lambda g: g.s_m)),
+                               obstacles=tuple(sorted(obstacles, key=lambda o: o.s_m)))
 
 
 GENERATE_CACHE_SIZE: int = 16

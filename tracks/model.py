@@ -145,6 +145,12 @@ def _finite_positive(value: float, what: str) -> None:
         raise ValueError(f"{what} must be a finite number > 0, got {value!r}")
 
 
+ELEMENT_FIELDS: tuple[str, ...] = ("start_line_s_m", "gaps", "obstacles", "intersections",
+                                   "name", "description", "seed")
+"""The fields of a ``Track`` that leave its road (segments, start, closed, lane width) as
+it is: what ``Track.with_elements`` changes."""
+
+
 @dataclass(frozen=True)
 class Track:
     """A Carolo-Cup road: a chain of segments from ``start`` plus its markings' elements.
@@ -201,6 +207,25 @@ class Track:
                         (self.start.heading_rad, "start.heading_rad")):
             if not math.isfinite(v):
                 raise ValueError(f"{what} must be finite, got {v!r}")
+
+    def with_elements(self, **changes: object) -> Track:
+        """``dataclasses.replace`` for the fields that leave the road as it is (its
+        elements and labels: ``ELEMENT_FIELDS``): the copy keeps what was computed from the
+        road (segment table, heading table, centre-line extremes, spatial index) instead
+        of computing it again, and skips the road's checks, passed already. A generated
+        track is copied 2–3 times on its way to an env (intersections, elements, the
+        cartons taken off)."""
+        unknown = sorted(set(changes) - set(ELEMENT_FIELDS))
+        if unknown:
+            raise TypeError(f"with_elements changes only {', '.join(ELEMENT_FIELDS)}, not "
+                            f"{', '.join(unknown)}; use dataclasses.replace")
+        copy = object.__new__(Track)
+        copy.__dict__.update(self.__dict__)  # the fields, and the road's cached properties
+        for name, value in changes.items():
+            if name in ("gaps", "obstacles", "intersections"):
+                value = tuple(value)  # type: ignore[arg-type]  # as __post_init__ does
+            object.__setattr__(copy, name, value)
+        return copy
 
     # ------------------------------------------------------------------ layout
     @cached_property

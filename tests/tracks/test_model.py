@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.conftest import generated
-from tfalda_sim.tracks import Arc, Lane, Pose, Straight, Track, load_named
+from tfalda_sim.tracks import Arc, Gap, Lane, Line, Pose, Straight, Track, generate, load_named
 from tfalda_sim.tracks.geometry import project
 
 segment = st.one_of(
@@ -208,3 +208,26 @@ def test_bounds_are_the_extremes_of_the_2_cm_samples(seed: int) -> None:
     want = (pts[:, 0].min() - pad, pts[:, 1].min() - pad,
             pts[:, 0].max() + pad, pts[:, 1].max() + pad)
     assert track.bounds(0.3) == tuple(float(v) for v in want)
+
+
+def test_with_elements_is_replace_keeping_what_the_road_computed() -> None:
+    """A copy with other elements equals ``dataclasses.replace``'s, shares the road's
+    computed tables (not computed again), and refuses fields that change the road."""
+    import dataclasses
+    import pickle
+
+    track = generate(4)
+    track.bounds()
+    track.locate(track.start.x_m, track.start.y_m)
+    gap = Gap(Line.LEFT, 1.0, 0.2)
+    copy = track.with_elements(obstacles=[], gaps=[gap], name="copy")
+    want = dataclasses.replace(track, obstacles=(), gaps=(gap,), name="copy")
+    assert copy == want and copy.obstacles == () and copy.gaps == (gap,)
+    assert copy.table is track.table and copy.index is track.index
+    assert copy.bounds() == want.bounds()
+    for name in ("x0", "y0", "h0", "kappa", "length", "s0"):
+        np.testing.assert_array_equal(getattr(copy.table, name), getattr(want.table, name))
+    assert track.obstacles and track.name != "copy"  # the original is left as it was
+    assert pickle.loads(pickle.dumps(copy)) == copy
+    with pytest.raises(TypeError, match=r"lane_width_m; use dataclasses\.replace"):
+        track.with_elements(lane_width_m=0.5)

@@ -108,7 +108,7 @@ def generated_scenario(seed: int, *, params: GeneratorParams | None = None,
     if not (math.isfinite(laps) and laps > 0):
         raise ValueError(f"laps must be finite and > 0, got {laps}")
     track = generate(seed, params)
-    track = dataclasses.replace(track, obstacles=())
+    track = track.with_elements(obstacles=())
     step = speed_m_s * stride / fps
     if not (math.isfinite(step) and step > 0):
         raise ValueError(f"speed_m_s × stride / fps must be a finite step > 0 m, got {step}")
