@@ -80,9 +80,11 @@ def _make_block_sums(blocks: int):  # type: ignore[no-untyped-def]  # numba's in
     @intrinsic
     def block_sums(typingctx, flat, steps, first, n, width, sign, base, out
                    ):  # type: ignore[no-untyped-def]
+        # Contiguous arrays only: the loads and stores step through raw memory.
         if not (isinstance(flat, types.Array) and isinstance(out, types.Array)
                 and flat.dtype == out.dtype and flat.dtype in (types.uint16, types.int32)
-                and isinstance(steps, types.Array) and steps.dtype == types.int32):
+                and isinstance(steps, types.Array) and steps.dtype == types.int32
+                and flat.layout == out.layout == steps.layout == "C"):
             return None
         ip = types.intp
 
@@ -191,7 +193,8 @@ def search_candidates(flat: np.ndarray, height: int, width: int,
     largest segment sum over all end x of the bottom row (``best_i``, int32) and that end x
     (``best_end``, int32). ``segments`` is ``segment_steps(height, width)``; ``sums`` is
     scratch of ``flat``'s type, of length ≥ width + ``SIMD_BLOCK``. Arrays too short for
-    these raise ValueError (the block sums read and write without bounds checks)."""
+    these raise ValueError, strided ones fail to compile (numba's TypingError): the block
+    sums read and write contiguous memory without bounds checks."""
     steps, first = segments
     w = width
     if height < 1 or w < 1:

@@ -138,6 +138,11 @@ def test_the_search_refuses_arrays_it_would_read_or_write_past() -> None:
         args[k] = value
         with pytest.raises(ValueError, match="search_candidates"):
             search_candidates(*args)
+    from numba.core.errors import TypingError
+
+    strided = np.zeros(2 * (h * w + SIMD_BLOCK), np.int32)[::2]  # long enough, not contiguous
+    with pytest.raises(TypingError, match="block_sums"):
+        search_candidates(strided, *ok[1:])
 
 
 def _search(img: np.ndarray, dtype: type) -> tuple[list[int], list[int]]:
