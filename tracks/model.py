@@ -219,7 +219,7 @@ class Track:
         if unknown:
             raise TypeError(f"with_elements changes only {', '.join(ELEMENT_FIELDS)}, not "
                             f"{', '.join(unknown)}; use dataclasses.replace")
-        copy = object.__new__(Track)
+        copy = object.__new__(type(self))
         copy.__dict__.update(self.__dict__)  # the fields, and the road's cached properties
         for name, value in changes.items():
             if name in ("gaps", "obstacles", "intersections"):

@@ -223,7 +223,7 @@ def test_with_elements_is_replace_keeping_what_the_road_computed() -> None:
     copy = track.with_elements(obstacles=[], gaps=[gap], name="copy")
     want = dataclasses.replace(track, obstacles=(), gaps=(gap,), name="copy")
     assert copy == want and copy.obstacles == () and copy.gaps == (gap,)
-    assert copy.table is track.table and copy.index is track.index
+    assert copy.table is track.table  # not computed again
     assert copy.bounds() == want.bounds()
     for name in ("x0", "y0", "h0", "kappa", "length", "s0"):
         np.testing.assert_array_equal(getattr(copy.table, name), getattr(want.table, name))
@@ -231,3 +231,15 @@ def test_with_elements_is_replace_keeping_what_the_road_computed() -> None:
     assert pickle.loads(pickle.dumps(copy)) == copy
     with pytest.raises(TypeError, match=r"lane_width_m; use dataclasses\.replace"):
         track.with_elements(lane_width_m=0.5)
+
+
+def test_every_track_field_is_road_or_element() -> None:
+    """``with_elements`` keeps the road's computed tables: a new field must be classified
+    (road fields change the road; element fields may be changed by ``with_elements``)."""
+    import dataclasses
+
+    from tfalda_sim.tracks.model import ELEMENT_FIELDS
+
+    road = {"segments", "closed", "start", "lane_width_m"}
+    assert road | set(ELEMENT_FIELDS) == {f.name for f in dataclasses.fields(Track)}
+    assert not road & set(ELEMENT_FIELDS)

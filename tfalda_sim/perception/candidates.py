@@ -17,7 +17,7 @@ vectorise; that is ``W² · H`` additions in SIMD instead of ``W²`` scalar line
 starts are summed in blocks of ``SIMD_BLOCK`` lanes held in vector registers over all the
 segment's samples (``_block_sums``), reading the samples' offsets from a table built once
 per image height (``segment_steps``): a row addition through memory per sample, with its
-stepped offset, had cost 5× as much. The detector's images hold their sums in 16 bits
+stepped offset, had cost 2–4× as much. The detector's images hold their sums in 16 bits
 when no segment can exceed them (at most ``UINT16_MAX_SAMPLES`` samples of 255).
 """
 
@@ -61,11 +61,13 @@ segment has at most that many samples of at most 255) [px]."""
 SIMD_BLOCK: int = 32
 """Starts summed at once by the candidate search, in vector registers [lanes]: one 512-bit
 register of uint16 sums (two of AVX2), four of int32. Row ends are padded to whole blocks
-(the extra lanes read the zeros past the image, are never used)."""
+(the extra lanes read on into the next row, the last rows into the zeros past the image;
+they are never used)."""
 
 SEGMENT_TABLES_KEPT: int = 16
 """Segment tables ``segment_steps`` keeps (one per image height and width class; the
-thesis' ROIs use 2–4): bounds their memory whatever the images asked for."""
+thesis' ROIs use 2–4): bounds their number, whatever the images asked for (a table
+holds ≈ width²/2 samples of 8 bytes: 33 MB for a 2000 px wide image)."""
 
 
 def _make_block_sums(blocks: int):  # type: ignore[no-untyped-def]  # numba's intrinsic
@@ -80,11 +82,13 @@ def _make_block_sums(blocks: int):  # type: ignore[no-untyped-def]  # numba's in
     @intrinsic
     def block_sums(typingctx, flat, steps, first, n, width, sign, base, out
                    ):  # type: ignore[no-untyped-def]
-        # Contiguous arrays only: the loads and stores step through raw memory.
+        # Contiguous arrays of the shapes search_candidates checks, a writable out: the
+        # loads and stores step through raw memory.
         if not (isinstance(flat, types.Array) and isinstance(out, types.Array)
                 and flat.dtype == out.dtype and flat.dtype in (types.uint16, types.int32)
                 and isinstance(steps, types.Array) and steps.dtype == types.int32
-                and flat.layout == out.layout == steps.layout == "C"):
+                and flat.layout == out.layout == steps.layout == "C"
+                and flat.ndim == out.ndim == 1 and steps.ndim == 2 and out.mutable):
             return None
         ip = types.intp
 
@@ -126,7 +130,7 @@ _block_sums_3 = _make_block_sums(3)
 
 
 @njit(cache=True, error_model="numpy")
-def build_segment_steps(height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
+def _build_segment_steps(height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
     """The samples of every segment of an image ``height`` rows high, for every
     ``|D|`` < ``width``: ``(steps, first)``, ``steps`` int32 ``(total, 2)`` rows of
     (row, column offset ≥ 0), the segment of ``|D|`` = d at ``steps[first[d]:first[d + 1]]``
@@ -166,7 +170,7 @@ def build_segment_steps(height: int, width: int) -> tuple[np.ndarray, np.ndarray
 
 
 def segment_steps(height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
-    """``build_segment_steps`` for images ``height`` × ``width`` [px], read-only and kept
+    """``_build_segment_steps`` for images ``height`` × ``width`` [px], read-only and kept
     (``SEGMENT_TABLES_KEPT``): a table serves every width up to its own, which is rounded
     up to a power of two (at least 128), so a detector's ROIs of changing widths share one
     table per height."""
@@ -177,7 +181,7 @@ def segment_steps(height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
 
 @functools.lru_cache(maxsize=SEGMENT_TABLES_KEPT)
 def _segment_steps(height: int, width: int) -> tuple[np.ndarray, np.ndarray]:
-    steps, first = build_segment_steps(height, width)
+    steps, first = _build_segment_steps(height, width)
     steps.flags.writeable = False
     first.flags.writeable = False
     return steps, first
@@ -191,10 +195,12 @@ def search_candidates(flat: np.ndarray, height: int, width: int,
     pixels row by row, int32 — or uint16 if no segment sum can exceed 16 bits
     (``UINT16_MAX_SAMPLES``) — followed by at least ``SIMD_BLOCK`` padding values): the
     largest segment sum over all end x of the bottom row (``best_i``, int32) and that end x
-    (``best_end``, int32). ``segments`` is ``segment_steps(height, width)``; ``sums`` is
+    (``best_end``, int32). ``segments`` is ``segment_steps(height, width)`` (read-only;
+    its height and size are checked, not every entry); ``sums`` is
     scratch of ``flat``'s type, of length ≥ width + ``SIMD_BLOCK``. Arrays too short for
-    these raise ValueError, strided ones fail to compile (numba's TypingError): the block
-    sums read and write contiguous memory without bounds checks."""
+    these raise ValueError; strided, multi-dimensional or read-only ones fail to compile
+    (numba's TypingError): the block sums read and write contiguous memory without bounds
+    checks."""
     steps, first = segments
     w = width
     if height < 1 or w < 1:
@@ -388,7 +394,7 @@ def choose_lane(gradient: np.ndarray, roi_x: float, scale_x: float, first: bool,
     for r in range(h):
         for c in range(w):
             flat[r * w + c] = gradient[r, c]
-    return _pick(flat, h, w, build_segment_steps(h, w), roi_x, scale_x, first,
+    return _pick(flat, h, w, _build_segment_steps(h, w), roi_x, scale_x, first,
                  previous_p_px, previous_d_px, previous_i, kp, kd, ki)
 
 

@@ -106,15 +106,15 @@ def test_wide_images_sum_in_every_block_combination(width: int) -> None:
 def test_segment_tables_are_kept_per_height_bounded_and_read_only() -> None:
     from tfalda_sim.perception.candidates import (
         SEGMENT_TABLES_KEPT,
+        _build_segment_steps,
         _segment_steps,
-        build_segment_steps,
         segment_steps,
     )
 
     steps, first = segment_steps(42, 90)
     assert segment_steps(42, 75)[0] is steps  # one table for the ROIs' changing widths
     assert not steps.flags.writeable and not first.flags.writeable
-    want_steps, want_first = build_segment_steps(42, 90)
+    want_steps, want_first = _build_segment_steps(42, 90)
     assert (first[:91] == want_first).all() and (steps[:want_first[-1]] == want_steps).all()
     for h in range(1, 3 * SEGMENT_TABLES_KEPT):
         segment_steps(h, 10)
@@ -125,24 +125,40 @@ def test_segment_tables_are_kept_per_height_bounded_and_read_only() -> None:
 
 def test_the_search_refuses_arrays_it_would_read_or_write_past() -> None:
     """The block sums have no bounds checks of their own: the search checks first."""
-    from tfalda_sim.perception.candidates import SIMD_BLOCK, search_candidates, segment_steps
+    from tfalda_sim.perception.candidates import (
+        SIMD_BLOCK,
+        _build_segment_steps,
+        search_candidates,
+        segment_steps,
+    )
 
     h, w = 5, 40
     ok = (np.zeros(h * w + SIMD_BLOCK, np.int32), h, w, segment_steps(h, w),
           np.empty(w, np.int32), np.empty(w, np.int32), np.empty(w + SIMD_BLOCK, np.int32))
     search_candidates(*ok)
     bad = {0: np.zeros(h * w, np.int32), 3: segment_steps(h + 1, w),
-           6: np.empty(w, np.int32), 4: np.empty(w - 1, np.int32)}
+           6: np.empty(w, np.int32), 4: np.empty(w - 1, np.int32),
+           5: np.empty(w - 1, np.int32), 1: 0, 2: -1}
     for k, value in bad.items():
         args = list(ok)
         args[k] = value
         with pytest.raises(ValueError, match="search_candidates"):
             search_candidates(*args)
+    narrow = _build_segment_steps(h, w - 1)  # a table for narrower images
+    with pytest.raises(ValueError, match="segment_steps"):
+        search_candidates(*ok[:3], narrow, *ok[4:])
     from numba.core.errors import TypingError
 
     strided = np.zeros(2 * (h * w + SIMD_BLOCK), np.int32)[::2]  # long enough, not contiguous
-    with pytest.raises(TypingError, match="block_sums"):
-        search_candidates(strided, *ok[1:])
+    empty_2d = np.zeros((h * w + SIMD_BLOCK, 0), np.int32)  # its shape[0] passes, no data
+    frozen = np.zeros(w + SIMD_BLOCK, np.int32)
+    frozen.flags.writeable = False
+    for k, value in ((0, strided), (0, empty_2d), (6, frozen)):
+        args = list(ok)
+        args[k] = value
+        with pytest.raises(TypingError, match="block_sums"):
+            search_candidates(*args)
+    assert not frozen.any()
 
 
 def _search(img: np.ndarray, dtype: type) -> tuple[list[int], list[int]]:
