@@ -43,92 +43,58 @@ from tfalda_sim.rendering import Effects, Renderer, build_scene
 from tfalda_sim.tracks import generate, load_named
 
 
-@njit(cache=True, error_model="numpy")
-def previous_search_candidates(flat: np.ndarray, height: int, width: int,
-                               best_i: np.ndarray, best_end: np.ndarray,
-                               sums: np.ndarray) -> None:
-    """The candidate search before issue 18 (commit 1586277), unchanged: the reference."""
-    w = width
-    for x in range(w):
-        best_i[x] = 0
-        best_end[x] = 0
-    dy = height - 1
-    for dx in range(-(w - 1), w):
-        adx = abs(dx)
-        n = max(adx, dy) + 1
-        lo = max(0, -dx)
-        m = min(w, w - dx) - lo
-        acc = sums[:m]
-        acc[:] = 0
-        den = 2 * (n - 1)
-        ox = 0
-        y = 0
-        rx = n - 1
-        ry = n - 1
-        for i in range(n):
-            if i > 0:
-                rx += 2 * adx
-                if rx >= den:
-                    rx -= den
-                    ox += 1
-                ry += 2 * dy
-                if ry >= den:
-                    ry -= den
-                    y += 1
-            start = y * w + (lo + ox if dx >= 0 else lo - ox)
-            seg = flat[start:start + m]
+def row_search(block: int):  # type: ignore[no-untyped-def]  # a numba dispatcher
+    """The candidate search before this one, unchanged, padded to ``block`` lanes: each
+    sample a row addition through memory with a DDA step. ``block`` 1 is issue 4's search
+    (commit 1586277: the rows' rests ran as scalar code), ``SIMD_BLOCK`` the fifth
+    session's (commit b819aa8). ``block`` is a constant of the compiled code, as it was."""
+
+    @njit(error_model="numpy")
+    def search(flat: np.ndarray, height: int, width: int, best_i: np.ndarray,
+               best_end: np.ndarray, sums: np.ndarray) -> None:
+        w = width
+        for x in range(w):
+            best_i[x] = 0
+            best_end[x] = 0
+        dy = height - 1
+        for dx in range(-(w - 1), w):
+            adx = abs(dx)
+            n = max(adx, dy) + 1
+            lo = max(0, -dx)
+            m = min(w, w - dx) - lo
+            padded = (m + block - 1) // block * block
+            acc = sums[:padded]
+            acc[:] = 0
+            den = 2 * (n - 1)
+            ox = 0
+            y = 0
+            rx = n - 1
+            ry = n - 1
+            for i in range(n):
+                if i > 0:
+                    rx += 2 * adx
+                    if rx >= den:
+                        rx -= den
+                        ox += 1
+                    ry += 2 * dy
+                    if ry >= den:
+                        ry -= den
+                        y += 1
+                start = y * w + (lo + ox if dx >= 0 else lo - ox)
+                seg = flat[start:start + padded]
+                for k in range(padded):
+                    acc[k] += seg[k]
             for k in range(m):
-                acc[k] += seg[k]
-        for k in range(m):
-            x = lo + k
-            gt = np.int32(acc[k] > best_i[x])
-            best_i[x] = best_i[x] + gt * (acc[k] - best_i[x])
-            best_end[x] = best_end[x] + gt * (x + dx - best_end[x])
+                x = lo + k
+                gt = np.int32(acc[k] > best_i[x])
+                best_i[x] = best_i[x] + gt * (acc[k] - best_i[x])
+                best_end[x] = best_end[x] + gt * (x + dx - best_end[x])
+
+    return search
 
 
-@njit(cache=True, error_model="numpy")
-def row_search_candidates(flat: np.ndarray, height: int, width: int, best_i: np.ndarray,
-                          best_end: np.ndarray, sums: np.ndarray) -> None:
-    """The candidate search of issue 18's fifth session (commit b819aa8), unchanged: each
-    sample a row addition through memory, padded to whole ``SIMD_BLOCK`` blocks."""
-    w = width
-    block = SIMD_BLOCK
-    for x in range(w):
-        best_i[x] = 0
-        best_end[x] = 0
-    dy = height - 1
-    for dx in range(-(w - 1), w):
-        adx = abs(dx)
-        n = max(adx, dy) + 1
-        lo = max(0, -dx)
-        m = min(w, w - dx) - lo
-        padded = (m + block - 1) // block * block
-        acc = sums[:padded]
-        acc[:] = 0
-        den = 2 * (n - 1)
-        ox = 0
-        y = 0
-        rx = n - 1
-        ry = n - 1
-        for i in range(n):
-            if i > 0:
-                rx += 2 * adx
-                if rx >= den:
-                    rx -= den
-                    ox += 1
-                ry += 2 * dy
-                if ry >= den:
-                    ry -= den
-                    y += 1
-            start = y * w + (lo + ox if dx >= 0 else lo - ox)
-            seg = flat[start:start + padded]
-            for k in range(padded):
-                acc[k] += seg[k]
-        for k in range(m):
-            x = lo + k
-            gt = np.int32(acc[k] > best_i[x])
-            best_i[x] = best_i[x] + gt * (acc[k] - best_i[x])
-            best_end[x] = best_end[x] + gt * (x + dx - best_end[x])
+previous_search_candidates = row_search(1)
+row_search_candidates = row_search(SIMD_BLOCK)
 
 
 def additions(height: int, width: int) -> tuple[int, int]:
