@@ -29,10 +29,41 @@ class PixelGeometry:
     bonnet: np.ndarray  # uint8: 1 on the bonnet
 
 
+PIXEL_GEOMETRIES_KEPT: int = 4
+"""Pixel geometries kept per process (≈ 13 MB each for 752×480): computing one takes
+1–2 s (a Newton inversion of the lens for 5 × 360 k rays), and every renderer, so every
+env, needs its camera's."""
+
+_KEPT: dict[tuple, PixelGeometry] = {}
+
+
+def _key(camera: Camera, bonnet: Bonnet) -> tuple:
+    """What the pixel geometry depends on, by value (a camera read from its profile file
+    again is a new object with the same numbers)."""
+    polygon = None if bonnet.polygon_px is None else np.asarray(bonnet.polygon_px).tobytes()
+    return (type(camera), camera.K.tobytes(), camera.D.tobytes(), camera.width,
+            camera.height, camera.mount, bonnet.top_row, bonnet.edge_drop_px,
+            bonnet.enabled, polygon)
+
+
 def pixel_geometry(camera: Camera, bonnet: Bonnet | None = None) -> PixelGeometry:
-    """Compute the per-pixel constants of ``camera`` (once per camera and bonnet; the
-    camera's own bonnet unless ``bonnet`` is given)."""
+    """The per-pixel constants of ``camera`` (the camera's own bonnet unless ``bonnet`` is
+    given): computed once per camera and bonnet values and kept (``PIXEL_GEOMETRIES_KEPT``,
+    arrays read-only)."""
     bonnet = bonnet or camera.bonnet
+    key = _key(camera, bonnet)
+    geometry = _KEPT.get(key)
+    if geometry is None:
+        geometry = _compute(camera, bonnet)
+        for value in vars(geometry).values():
+            value.flags.writeable = False
+        if len(_KEPT) >= PIXEL_GEOMETRIES_KEPT:
+            _KEPT.pop(next(iter(_KEPT)))
+        _KEPT[key] = geometry
+    return geometry
+
+
+def _compute(camera: Camera, bonnet: Bonnet) -> PixelGeometry:
     h, w = camera.height, camera.width
     pos = camera.mount.position()
     rot = camera.mount.rotation()
