@@ -59,10 +59,10 @@ UINT16_MAX_SAMPLES: int = 65535 // 255
 segment has at most that many samples of at most 255) [px]."""
 
 SIMD_BLOCK: int = 32
-"""Starts summed at once by the candidate search, in vector registers [lanes]: one 512-bit
-register of uint16 sums (two of AVX2), four of int32. Row ends are padded to whole blocks
-(the extra lanes read on into the next row, the last rows into the zeros past the image;
-they are never used)."""
+"""Starts summed at once by the candidate search, in vector registers [lanes]: 32 uint16
+sums fill one 512-bit register (two of AVX2), 32 int32 sums two (four of AVX2). Row ends
+are padded to whole blocks (the extra lanes read on into the next row, the last rows into
+the zeros past the image; they are never used)."""
 
 SEGMENT_TABLES_KEPT: int = 16
 """Segment tables ``segment_steps`` keeps (one per image height and width class; the
