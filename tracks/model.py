@@ -18,7 +18,7 @@ from functools import cached_property
 import numpy as np
 
 from .dimensions import LANE_WIDTH_M, LINE_WIDTH_M
-from .geometry import Pose, SegmentTable, pose_at
+from .geometry import Pose, SegmentTable, extreme_sample_indices, pose_at
 from .index import GridIndex, build_index, locate_point, locate_points
 
 MAX_TRACK_LENGTH_M: float = 250.0
@@ -278,7 +278,7 @@ class Track:
         """Segment index and local coordinate [m] for arc lengths ``s`` [m]."""
         total = self.length_m
         s = np.asarray(s, dtype=np.float64)
-        if not np.all(np.isfinite(s)):
+        if not np.isfinite(s).all():
             raise ValueError("arc length s must be finite")
         if self.closed:
             s = np.mod(s, total)
@@ -289,7 +289,9 @@ class Track:
                 "only closed tracks wrap around"
             )
         t = self.table
-        idx = np.clip(np.searchsorted(t.s0, s, side="right") - 1, 0, len(t.s0) - 1)
+        # maximum/minimum: np.clip's own checks cost more than the search, per query
+        idx = np.minimum(np.maximum(np.searchsorted(t.s0, s, side="right") - 1, 0),
+                         len(t.s0) - 1)
         return idx, s - t.s0[idx]
 
     def pose(self, s: np.ndarray | float, lateral_m: np.ndarray | float = 0.0
@@ -305,12 +307,14 @@ class Track:
         h = h0 + k * u
         straight = k == 0.0
         safe_k = np.where(straight, 1.0, k)
-        x = np.where(straight, t.x0[idx] + u * np.cos(h0),
-                     t.x0[idx] + (np.sin(h) - np.sin(h0)) / safe_k)
-        y = np.where(straight, t.y0[idx] + u * np.sin(h0),
-                     t.y0[idx] - (np.cos(h) - np.cos(h0)) / safe_k)
+        # Each sine and cosine once (the same ufuncs on the same arrays as ever: numpy's
+        # vectorised sin/cos differ from libm's by ulps, so no scalar math here).
+        sin_h0, cos_h0, sin_h, cos_h = np.sin(h0), np.cos(h0), np.sin(h), np.cos(h)
+        x0, y0 = t.x0[idx], t.y0[idx]
+        x = np.where(straight, x0 + u * cos_h0, x0 + (sin_h - sin_h0) / safe_k)
+        y = np.where(straight, y0 + u * sin_h0, y0 - (cos_h - cos_h0) / safe_k)
         lat = np.asarray(lateral_m, dtype=np.float64)
-        return x - lat * np.sin(h), y + lat * np.cos(h), h
+        return x - lat * sin_h, y + lat * cos_h, h
 
     def position(self, s: np.ndarray | float, lateral_m: np.ndarray | float = 0.0) -> np.ndarray:
         """World position ``(..., 2)`` [m] at arc length ``s`` [m] and lateral offset [m]."""
@@ -383,17 +387,7 @@ class Track:
         if self.closed:
             s = s[:-1]
         t = self.table
-        delta = total / n
-        marks = [t.s0, t.s0 + t.length]
-        for j in np.flatnonzero(t.kappa != 0.0):
-            h0 = float(t.h0[j])
-            h1 = h0 + float(t.kappa[j] * t.length[j])
-            quarter = 0.5 * math.pi
-            m = np.arange(math.floor(min(h0, h1) / quarter), math.ceil(max(h0, h1) / quarter) + 1)
-            marks.append(t.s0[j] + (m * quarter - h0) / t.kappa[j])
-        centre = np.rint(np.concatenate(marks) / delta).astype(np.int64)
-        idx = np.unique(np.clip((centre[:, None] + np.arange(-3, 4)).ravel(), 0, len(s) - 1))
-        return s[idx]
+        return s[extreme_sample_indices(t.s0, t.length, t.h0, t.kappa, total / n, len(s))]
 
     # ----------------------------------------------------------- reverse query
     @cached_property

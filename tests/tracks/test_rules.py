@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
 from tests.conftest import generated
@@ -20,7 +21,13 @@ from tfalda_sim.tracks import (
     load_named,
     validate,
 )
-from tfalda_sim.tracks.rules import min_centre_radius_m, min_road_clearance_m
+from tfalda_sim.tracks.geometry import project
+from tfalda_sim.tracks.rules import (
+    OVERLAP_SAMPLE_STEP_M,
+    _close_approaches,
+    min_centre_radius_m,
+    min_road_clearance_m,
+)
 
 
 def rules_of(track: Track) -> list[str]:
@@ -143,3 +150,55 @@ def test_every_violation_is_reported_not_just_the_first() -> None:
 def test_generated_tracks_pass_every_rule() -> None:
     for seed in range(30):
         assert validate(generated(seed)) == []
+
+
+def _close_approaches_unfiltered(track: Track) -> list[tuple[float, float, float]]:
+    """``_close_approaches`` without its cheap distance bound: every segment's pieces
+    outside the three windows are projected on (the plain definition)."""
+    clearance = min_road_clearance_m(track.lane_width_m)
+    exclude = 0.5 * math.pi * clearance
+    t, total = track.table, track.length_m
+    s, pts = track.sample(OVERLAP_SAMPLE_STEP_M)
+    shifts = (-total, 0.0, total) if track.closed else (0.0,)
+    hits = []
+    for si, (px, py) in zip(s, pts, strict=True):
+        for j in range(len(t.length)):
+            pieces = [(t.s0[j], t.s0[j] + t.length[j])]
+            for shift in shifts:
+                lo, hi = si - exclude + shift, si + exclude + shift
+                pieces = [q for a, b in pieces for q in (
+                    [(a, b)] if hi <= a or lo >= b else
+                    [*([(a, lo)] if a < lo else []), *([(hi, b)] if hi < b else [])])]
+            best = (math.inf, 0.0)
+            for a, b in pieces:
+                u, _, dist = project(t.x0[j], t.y0[j], t.h0[j], t.kappa[j], a - t.s0[j],
+                                     b - t.s0[j], px, py)
+                best = min(best, (dist, t.s0[j] + u), key=lambda v: v[0])
+            if best[0] < clearance:
+                hits.append((float(si), float(best[1]), float(best[0])))
+    return hits
+
+
+@pytest.mark.parametrize("case", ["spiral", "figure-eight", "generated"])
+def test_close_approaches_bound_drops_no_hit(case: str) -> None:
+    """The kernel's squared distance bound only skips segments that cannot come closer
+    than the clearance: its hits are the unfiltered definition's, exactly."""
+    if case == "spiral":
+        r = 1.41
+        track = Track((Straight(5.0), Arc(r, math.pi / 2), Straight(0.5), Arc(r, math.pi / 2),
+                       Straight(2.0), Arc(r, math.pi / 2), Arc(r, math.pi / 2),
+                       Straight(1.0)), closed=False)
+    elif case == "figure-eight":
+        track = load_named("figure-eight")
+    else:
+        track = generated(3)
+    clearance = min_road_clearance_m(track.lane_width_m)
+    t = track.table
+    s, pts = track.sample(OVERLAP_SAMPLE_STEP_M)
+    got = _close_approaches(np.column_stack([s, pts]), t.x0, t.y0, t.h0, t.kappa, t.length,
+                            t.s0, track.length_m, track.closed, 0.5 * math.pi * clearance,
+                            clearance)
+    want = _close_approaches_unfiltered(track)
+    assert [tuple(map(float, h)) for h in got] == want
+    if case != "generated":
+        assert want  # the crossing and the spiral do come close
