@@ -143,6 +143,30 @@ def test_tile_wise_raster_equals_whole_raster() -> None:
             np.testing.assert_array_equal(full.labels, whole.labels)
 
 
+
+def test_fill_listed_paints_the_listed_tiles_once_and_refuses_others() -> None:
+    """``fill_listed`` paints what is listed and not painted yet (a tile listed twice, or
+    again later, once), records each tile once per call, leaves the kernel's mask clear,
+    and refuses an index outside the tile grid before it paints anything."""
+    from tfalda_sim.tracks.raster import TiledMarkingMap
+
+    track = load_named("oval")
+    tiled = TiledMarkingMap(track, labels=False)
+    whole = rasterize(track)
+    grid = tiled.filled.size
+    painted = np.flatnonzero(whole.intensity[::64, ::64])  # tiles of the road, roughly
+    some = np.array([painted[0], painted[0], painted[1]], np.int64)
+    tiled.fill_listed(some)
+    assert np.flatnonzero(tiled.filled).tolist() == sorted({int(t) for t in some})
+    assert not tiled._todo.any()
+    tiled.fill_listed(some[:1])  # painted already: nothing recorded
+    assert [t.tolist() for t in tiled._painted] == [some.tolist()]
+    for bad in (grid, -1):
+        with pytest.raises(IndexError, match="outside the map's tile grid"):
+            tiled.fill_listed(np.array([painted[2], bad]))
+    assert tiled.filled.sum() == 2 and not tiled._todo.any()
+
+
 def test_a_map_without_labels_paints_the_same_intensity() -> None:
     """``labels=False`` (a scene's map) writes no labels and the same intensity, tile by
     tile; it cannot become a MarkingMap."""

@@ -256,6 +256,20 @@ def _propagate(queue: np.ndarray, n: int, need: np.ndarray, filled: np.ndarray,
 
 
 @njit(cache=True)
+def _needed_tiles(bounds: np.ndarray, affines: np.ndarray, size0_x: float, size0_y: float,
+                  sizes: np.ndarray, tile_shift: np.ndarray, tile: np.ndarray,
+                  grids: np.ndarray, offsets: np.ndarray, filled: np.ndarray,
+                  need: np.ndarray, queue: np.ndarray) -> int:
+    """``_mark_needed`` and, if a tile is missing, ``_propagate``: one call a frame (a
+    call from Python costs µs). Returns how many tiles ``queue`` lists, sorted."""
+    n = _mark_needed(bounds, affines, size0_x, size0_y, sizes, tile_shift, grids, offsets,
+                     filled, need, queue)
+    if n == 0:
+        return 0
+    return _propagate(queue, n, need, filled, sizes, tile, grids, offsets)
+
+
+@njit(cache=True)
 def _store_level0(atlas: np.ndarray, guard: int, intensity: np.ndarray, wear: np.ndarray,
                   use_wear: bool, level0: np.ndarray, grid_cols: int, t: int) -> None:
     """Copy the level-0 tiles listed in ``level0`` (numbered row-major, ``grid_cols`` a
@@ -293,6 +307,19 @@ def _mip_tiles(atlas: np.ndarray, origins: np.ndarray, tiles: np.ndarray, sizes:
                      + np.int32(atlas[sy + 2 * r + 1, sx + 2 * c])
                      + np.int32(atlas[sy + 2 * r + 1, sx + 2 * c + 1]))
                 atlas[dy + r, dx + c] = np.uint8((a + 2) >> 2)
+
+
+@njit(cache=True)
+def _finish_fill(atlas: np.ndarray, origins: np.ndarray, queue: np.ndarray, n0: int,
+                 sizes: np.ndarray, tile: np.ndarray, grids: np.ndarray, offsets: np.ndarray,
+                 filled: np.ndarray, need: np.ndarray) -> None:
+    """The last step of a fill, in one call: ``_mip_tiles`` of the queue's tiles past its
+    ``n0`` of level 0 (painted already), then every listed tile marked filled and no
+    longer needed."""
+    _mip_tiles(atlas, origins, queue[n0:], sizes, tile, grids, offsets)
+    for index in queue:
+        filled[index] = 1
+        need[index] = 0
 
 
 @njit(cache=True)
@@ -348,6 +375,7 @@ class MipTiles:
         self.grids = -(-self.sizes // self.tile[:, None])
         counts = self.grids[:, 0] * self.grids[:, 1]
         self.offsets = np.concatenate(([0], np.cumsum(counts)[:-1])).astype(np.int64)
+        self._level0_tiles = int(counts[0])  # a Python int: a cheap searchsorted key
         self.filled = np.zeros(int(counts.sum()), np.uint8)
         self.need = np.zeros_like(self.filled)
         self.n_filled = 0
@@ -368,6 +396,7 @@ class MipTiles:
         # paints later would never reach the atlas.
         self.__dict__.update(state)
         self._queue = np.empty(len(self.filled), np.int64)
+        self._level0_tiles = int(self.grids[0, 0] * self.grids[0, 1])  # pickled before it
         if "n_filled" not in state:  # pickled before the fill lists
             self.n_filled = int(np.count_nonzero(self.filled))
             self._written_runs = [np.flatnonzero(self.filled)]
@@ -415,9 +444,9 @@ class MipTiles:
         """Fill what a view reads (``Scene.prepare``)."""
         self._check_live()
         rows, cols = self.marking.shape
-        n = _mark_needed(bounds, affines, float(cols), float(rows), self.sizes,
-                         self.tile_shift, self.grids, self.offsets, self.filled, self.need,
-                         self._queue)
+        n = _needed_tiles(bounds, affines, float(cols), float(rows), self.sizes,
+                          self.tile_shift, self.tile, self.grids, self.offsets, self.filled,
+                          self.need, self._queue)
         if n:
             self._fill(n)
 
@@ -445,31 +474,28 @@ class MipTiles:
         self.need[todo] = 1
         self._queue[:len(todo)] = todo
         if len(todo):
-            self._fill(len(todo))
+            self._fill(_propagate(self._queue, len(todo), self.need, self.filled, self.sizes,
+                                  self.tile, self.grids, self.offsets))
         self.ensure_walls(0.0, float(self.wall.shape[0]))
 
     def _fill(self, n: int) -> None:
-        """Fill the ``n`` tiles listed in the queue (marked in ``need``) and those under
-        them."""
-        n = _propagate(self._queue, n, self.need, self.filled, self.sizes, self.tile,
-                       self.grids, self.offsets)
+        """Fill the ``n`` tiles listed in the queue (marked in ``need``; with those under
+        them, sorted: ``_propagate``)."""
         queue = self._queue[:n]
         self._written_runs.append(queue.copy())  # for ``retire``, even if this fails
         try:
-            self._fill_queued(queue)
+            self._fill_queued(queue)  # marks them filled, last
         except BaseException:
             self.need[queue] = 0  # not filled: the next view that reads them lists them again
             raise
-        self.filled[queue] = 1
-        self.need[queue] = 0
         self.n_filled += n
         self._tiles_complete = self.n_filled == len(self.filled)
         self.complete = self._tiles_complete and bool(self.wall_filled.all())
 
     def _fill_queued(self, queue: np.ndarray) -> None:
-        """Paint and filter the listed tiles (sorted: level 0 first)."""
-        n = len(queue)
-        n0 = int(np.searchsorted(queue, self.offsets[1])) if len(self.offsets) > 1 else n
+        """Paint and filter the listed tiles (sorted: level 0 first), then mark them
+        filled."""
+        n0 = int(queue.searchsorted(self._level0_tiles))
         level0 = queue[:n0]  # level 0 is numbered first, as the marking map's tiles
         self.marking.fill_listed(level0)
         if not self.level0_in_atlas:
@@ -479,8 +505,8 @@ class MipTiles:
             remaining = self._remaining if use_wear else np.ones((1, 1), np.float32)
             _store_level0(self.atlas, ATLAS_GUARD, self.marking.intensity, remaining,
                           use_wear, level0, int(self.grids[0, 1]), int(self.tile[0]))
-        _mip_tiles(self.atlas, self.origins, queue[n0:], self.sizes, self.tile, self.grids,
-                   self.offsets)
+        _finish_fill(self.atlas, self.origins, queue, n0, self.sizes, self.tile, self.grids,
+                     self.offsets, self.filled, self.need)
 
 
 def _blobs(rng: np.random.Generator, shape: tuple[int, int], count: int,
