@@ -63,11 +63,12 @@ class Sb3VectorEnv(VecEnv):
         if self._actions is None:
             raise RuntimeError("step_wait() without step_async(actions) before it")
         actions, self._actions = self._actions, None
-        obs, rewards, terminated, truncated, merged = self.venv.step(actions)
-        infos = split_infos(merged, self.num_envs)
+        # Each env's info dict as the env gave it (no merge into columns and split back).
+        obs, rewards, terminated, truncated, infos = self.venv.step_per_env(actions)
         done = terminated | truncated
         step_infos: list[dict[str, Any]] = []
         for i, info in enumerate(infos):
+            info = dict(info)  # ours to change (an env may keep its dict)
             if done[i]:
                 # SubprocVecEnv: the last step's info + the last observation; the new
                 # episode's reset info apart.

@@ -368,6 +368,15 @@ class TfaldaTrackVectorEnv(VectorEnv):
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
                                           dict[str, Any]]:
+        obs, rewards, terminated, truncated, infos = self.step_per_env(actions)
+        return obs, rewards, terminated, truncated, _merge_infos(infos)
+
+    def step_per_env(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
+                                                  list[dict[str, Any]]]:
+        """``step``, with each env's info as its own dict (a list in env order) instead of
+        Gymnasium's merged columns: what stable-baselines3's ``VecEnv`` API wants, without
+        merging the infos only to split them again (≈ 85 µs a step here, in the process
+        that steps the first env and so sets the pace). The same dicts ``step`` merges."""
         self._check_open()
         acts = np.asarray(actions)
         if acts.shape[:1] != (self.num_envs,):
@@ -389,7 +398,7 @@ class TfaldaTrackVectorEnv(VectorEnv):
         if not same_step:
             self._autoreset = terminated | truncated
         return (_copy(self._observations), rewards, terminated, truncated,
-                _merge_infos([r[3] for r in results]))
+                [r[3] for r in results])
 
     def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
         """``getattr(env, name)(*args, **kwargs)`` on every env (or the attribute's value if

@@ -87,6 +87,34 @@ def test_rollouts_equal_sync_vector_env(num_envs: int, workers: int | None,
     assert any(np.any(step[2] | step[3]) for step in ours[2:])
 
 
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_step_per_env_gives_the_infos_step_merges(mode: AutoresetMode) -> None:
+    """``step_per_env`` is ``step`` with each env's own info dict: the same observations,
+    rewards and flags, and infos that ``step``'s merged columns hold, final ones of
+    ended episodes (SAME_STEP) included, from this process's env and the worker's."""
+    from tfalda_sim.envs.vector import _merge_infos
+
+    merged = rollout(TfaldaTrackVectorEnv(2, autoreset_mode=mode), seed=3, steps=80)
+    venv = TfaldaTrackVectorEnv(2, autoreset_mode=mode)
+    obs, info = venv.reset(seed=3)
+    per_env: list[Any] = [obs, info]
+    rng = np.random.default_rng(3)
+    for _ in range(80):
+        action = rng.uniform(-0.2, 1.0, venv.action_space.shape).astype(np.float32)
+        per_env.append(venv.step_per_env(action))
+    venv.close()
+    ended = 0
+    for got, want in zip(per_env[2:], merged[2:], strict=True):
+        assert_same(got[:4], want[:4])
+        infos = got[4]
+        assert isinstance(infos, list) and len(infos) == 2
+        assert all(type(v) in (float, int, bool, str, dict, np.ndarray)
+                   for info in infos for v in info.values())
+        assert_same(_merge_infos(infos), want[4])
+        ended += sum("final_info" in info for info in infos)
+    assert (ended > 0) == (mode is AutoresetMode.SAME_STEP)
+
 def test_same_seed_same_rollout_and_another_seed_differs() -> None:
     a = rollout(gym.make_vec("TfaldaTrack-v0", num_envs=2), seed=11, steps=30)
     b = rollout(gym.make_vec("TfaldaTrack-v0", num_envs=2), seed=11, steps=30)
