@@ -376,7 +376,8 @@ class TfaldaTrackVectorEnv(VectorEnv):
         """``step``, with each env's info as its own dict (a list in env order) instead of
         Gymnasium's merged columns: what stable-baselines3's ``VecEnv`` API wants, without
         merging the infos only to split them again (≈ 85 µs a step here, in the process
-        that steps the first env and so sets the pace). The same dicts ``step`` merges."""
+        that steps the first env and so sets the pace). The same dicts ``step`` merges;
+        those of this process's envs are the envs' own: copy one before changing it."""
         self._check_open()
         acts = np.asarray(actions)
         if acts.shape[:1] != (self.num_envs,):

@@ -525,7 +525,6 @@ def _raster_kernel(
                                              start_w, stop_w, has_special, with_labels)
 
 
-
 @njit(cache=True)
 def _paint_listed(tiles: np.ndarray, filled: np.ndarray, todo: np.ndarray,
                   intensity: np.ndarray, labels: np.ndarray, ox: float, oy: float, res: float,
@@ -534,34 +533,20 @@ def _paint_listed(tiles: np.ndarray, filled: np.ndarray, todo: np.ndarray,
                   lane_w: float, line_w: float, dash: float, period: float,
                   gap_line: np.ndarray, gap_lo: np.ndarray, gap_hi: np.ndarray,
                   passes: np.ndarray, start_s: float, start_w: float, stop_w: float,
-                  chunk_m: float, boxes: np.ndarray, tile: int, with_labels: bool
-                  ) -> np.ndarray:
-    """``TiledMarkingMap.fill_listed`` in one call (each numpy call from Python costs µs,
-    and a lazy scene fills a few tiles every other frame): the listed tiles not painted
-    yet (``filled``, flat, 0) are marked in ``todo`` (the kernel's mask: all 0 between
-    calls), painted (``_raster_kernel``), unmarked and set in ``filled``. Returns them."""
-    n = 0
-    for k in range(len(tiles)):
-        if not 0 <= tiles[k] < len(filled):
-            raise IndexError("a listed tile is outside the map's tile grid")
-        n += filled[tiles[k]] == 0
-    out = np.empty(n, np.int64)
-    if n == 0:
-        return out
+                  chunk_m: float, boxes: np.ndarray, tile: int, with_labels: bool) -> None:
+    """Paint the listed tiles (indices into the flat ``filled``, in range, not painted
+    yet) in one call: marked in ``todo`` (the kernel's mask, all 0 between calls),
+    painted (``_raster_kernel``), unmarked and set in ``filled``."""
     mask = todo.reshape(-1)
-    m = 0
     for k in range(len(tiles)):
-        if filled[tiles[k]] == 0:
-            out[m] = tiles[k]
-            mask[tiles[k]] = 1
-            m += 1
+        mask[tiles[k]] = 1
     _raster_kernel(intensity, labels, ox, oy, res, x0, y0, h0, kappa, length, s0, total,
                    closed, lane_w, line_w, dash, period, gap_line, gap_lo, gap_hi, passes,
                    start_s, start_w, stop_w, chunk_m, boxes, todo, tile, with_labels)
-    for k in range(n):
-        mask[out[k]] = 0
-        filled[out[k]] = 1
-    return out
+    for k in range(len(tiles)):
+        mask[tiles[k]] = 0
+        filled[tiles[k]] = 1
+
 
 _LINE_INDEX = {"right": 0, "centre": 1, "left": 2}
 
@@ -790,20 +775,32 @@ class TiledMarkingMap:
         self.fill_listed(np.flatnonzero(mask))
 
     def fill_listed(self, tiles: np.ndarray) -> None:
-        """Paint the tiles listed in ``tiles`` (int indices into ``filled``, row-major,
-        ``0 ≤ i < filled.size``: an IndexError otherwise) that are not painted yet: a view
-        needs a few of ~10⁴ tiles, so nothing here scans the whole grid."""
+        """Paint the tiles listed in ``tiles`` (a 1-D int array of indices into
+        ``filled``, row-major, ``0 ≤ i < filled.size``: a TypeError or IndexError
+        otherwise, before anything is painted) that are not painted yet: a view needs a few
+        of ~10⁴ tiles, so nothing here scans the whole grid."""
+        tiles = np.asarray(tiles)
+        flat = self.filled.reshape(-1)
+        if tiles.ndim != 1 or tiles.dtype.kind not in "iu":
+            raise TypeError(f"tiles must be a 1-D array of tile indices (ints), got "
+                            f"{tiles.dtype} of shape {tiles.shape}")
+        if len(tiles) and not (tiles.min() >= 0 and tiles.max() < len(flat)):
+            raise IndexError(f"a listed tile is outside the map's tile grid of {len(flat)} "
+                             "tiles")
+        todo = tiles[flat[tiles] == 0].astype(np.int64, copy=False)
+        if not len(todo):
+            return
         if self._boxes is None:
             ox, oy, res, x0, y0, h0, kappa, length = self._args[:8]
             lane_w, line_w, chunk_m = self._args[11], self._args[12], self._args[-1]
             self._boxes = _chunk_boxes(*self.shape, ox, oy, res, x0, y0, h0, kappa, length,
                                        lane_w, line_w, chunk_m)
+        # Recorded before they are painted: a Ctrl-C raised as the kernel returns must not
+        # leave painted tiles that ``painted_tiles`` (a retiring scene's zeroing) misses.
+        self._painted.append(todo)
         labels = self.labels if self.labels is not None else _NO_LABELS
-        todo = _paint_listed(np.asarray(tiles, np.int64), self.filled.reshape(-1), self._todo,
-                             self.intensity, labels, *self._args, self._boxes, self.tile_px,
-                             self.labels is not None)
-        if len(todo):
-            self._painted.append(todo)
+        _paint_listed(todo, flat, self._todo, self.intensity, labels, *self._args,
+                      self._boxes, self.tile_px, self.labels is not None)
 
     def painted_tiles(self) -> np.ndarray:
         """The painted tiles' indices into ``filled`` (row-major), without a scan of it."""

@@ -87,7 +87,6 @@ def test_rollouts_equal_sync_vector_env(num_envs: int, workers: int | None,
     assert any(np.any(step[2] | step[3]) for step in ours[2:])
 
 
-
 @pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
 def test_step_per_env_gives_the_infos_step_merges(mode: AutoresetMode) -> None:
     """``step_per_env`` is ``step`` with each env's own info dict: the same observations,

@@ -143,28 +143,35 @@ def test_tile_wise_raster_equals_whole_raster() -> None:
             np.testing.assert_array_equal(full.labels, whole.labels)
 
 
-
 def test_fill_listed_paints_the_listed_tiles_once_and_refuses_others() -> None:
-    """``fill_listed`` paints what is listed and not painted yet (a tile listed twice, or
-    again later, once), records each tile once per call, leaves the kernel's mask clear,
-    and refuses an index outside the tile grid before it paints anything."""
+    """``fill_listed`` paints what is listed and not painted yet (a tile listed twice in a
+    call is painted once; one painted already is neither painted nor recorded again),
+    leaves the kernel's mask clear, and refuses indices outside the tile grid and arrays
+    that are no 1-D int lists before it paints or records anything."""
     from tfalda_sim.tracks.raster import TiledMarkingMap
 
     track = load_named("oval")
     tiled = TiledMarkingMap(track, labels=False)
     whole = rasterize(track)
+    step = tiled.tile_px
     grid = tiled.filled.size
-    painted = np.flatnonzero(whole.intensity[::64, ::64])  # tiles of the road, roughly
+    painted = np.flatnonzero(whole.intensity[::step, ::step])  # tiles of the road, roughly
     some = np.array([painted[0], painted[0], painted[1]], np.int64)
     tiled.fill_listed(some)
     assert np.flatnonzero(tiled.filled).tolist() == sorted({int(t) for t in some})
     assert not tiled._todo.any()
     tiled.fill_listed(some[:1])  # painted already: nothing recorded
-    assert [t.tolist() for t in tiled._painted] == [some.tolist()]
-    for bad in (grid, -1):
-        with pytest.raises(IndexError, match="outside the map's tile grid"):
-            tiled.fill_listed(np.array([painted[2], bad]))
+    assert sorted(set(tiled.painted_tiles().tolist())) == sorted({int(t) for t in some})
+    before = tiled.intensity.copy()
+    for bad, error in ((np.array([painted[2], grid]), IndexError),
+                       (np.array([painted[2], -1]), IndexError),
+                       (np.array([float(painted[2])]), TypeError),
+                       (np.array([[painted[2]]]), TypeError)):
+        with pytest.raises(error, match=r"tile grid|1-D array of tile indices"):
+            tiled.fill_listed(bad)
     assert tiled.filled.sum() == 2 and not tiled._todo.any()
+    assert np.array_equal(tiled.intensity, before)
+    assert len(tiled.painted_tiles()) == 3  # the refused calls recorded nothing
 
 
 def test_a_map_without_labels_paints_the_same_intensity() -> None:

@@ -444,11 +444,15 @@ class MipTiles:
         """Fill what a view reads (``Scene.prepare``)."""
         self._check_live()
         rows, cols = self.marking.shape
-        n = _needed_tiles(bounds, affines, float(cols), float(rows), self.sizes,
-                          self.tile_shift, self.tile, self.grids, self.offsets, self.filled,
-                          self.need, self._queue)
-        if n:
-            self._fill(n)
+        try:
+            n = _needed_tiles(bounds, affines, float(cols), float(rows), self.sizes,
+                              self.tile_shift, self.tile, self.grids, self.offsets,
+                              self.filled, self.need, self._queue)
+            if n:
+                self._fill(n)
+        except BaseException:
+            self.need[:] = 0  # all 0 between calls: a Ctrl-C must not leave tiles unlisted
+            raise
 
     def ensure_walls(self, lo: float, hi: float) -> None:
         """Copy in the wall texture rows that bilinear taps of rows ``lo … hi`` [texels]
@@ -471,11 +475,15 @@ class MipTiles:
     def fill_all(self) -> None:
         self._check_live()
         todo = np.flatnonzero(self.filled == 0)
-        self.need[todo] = 1
-        self._queue[:len(todo)] = todo
-        if len(todo):
-            self._fill(_propagate(self._queue, len(todo), self.need, self.filled, self.sizes,
-                                  self.tile, self.grids, self.offsets))
+        try:
+            self.need[todo] = 1
+            self._queue[:len(todo)] = todo
+            if len(todo):
+                self._fill(_propagate(self._queue, len(todo), self.need, self.filled,
+                                      self.sizes, self.tile, self.grids, self.offsets))
+        except BaseException:
+            self.need[:] = 0  # as in ``ensure``
+            raise
         self.ensure_walls(0.0, float(self.wall.shape[0]))
 
     def _fill(self, n: int) -> None:
@@ -486,8 +494,15 @@ class MipTiles:
         try:
             self._fill_queued(queue)  # marks them filled, last
         except BaseException:
-            self.need[queue] = 0  # not filled: the next view that reads them lists them again
+            # The tiles not filled are listed again by the next view that reads them; a
+            # Ctrl-C raised as the last kernel returned finds them filled: counted.
+            self.need[queue] = 0
+            self._count_filled(int(np.count_nonzero(self.filled[queue])))
             raise
+        self._count_filled(n)
+
+    def _count_filled(self, n: int) -> None:
+        """``n`` more tiles are filled."""
         self.n_filled += n
         self._tiles_complete = self.n_filled == len(self.filled)
         self.complete = self._tiles_complete and bool(self.wall_filled.all())
