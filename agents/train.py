@@ -17,6 +17,7 @@ import platform
 import shutil
 import tempfile
 import time
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -55,6 +56,24 @@ class PpoConfig:
     lr_decay: bool = True
     """Decay the learning rate linearly to 0 over the run."""
     target_kl: float | None = None
+
+
+@contextlib.contextmanager
+def distribution_checks_off() -> Iterator[None]:
+    """torch.distributions' argument and sample checks off inside (the previous setting
+    restored after). They only raise on a NaN or out-of-support parameter and change no
+    number, yet they cost ≈ 40 % of a forward pass of the 64-64 policy (≈ 440 → 270 µs
+    here), once per env step in the rollouts; PyTorch's documentation of
+    ``Distribution.set_default_validate_args`` names this switch for speed. A NaN action
+    still stops a run: the env refuses it with a clear error."""
+    from torch.distributions import Distribution
+
+    before = Distribution._validate_args  # the class default that setting replaces
+    Distribution.set_default_validate_args(False)
+    try:
+        yield
+    finally:
+        Distribution.set_default_validate_args(before)
 
 
 def env_kwargs(speed_m_s: float = TRAIN_SPEED_M_S, seeds: tuple[int, int] = TRAIN_SEEDS,
@@ -186,7 +205,8 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
                 callbacks.append(bar)
             t0 = time.perf_counter()
             try:
-                model.learn(timesteps, callback=CallbackList(callbacks))
+                with distribution_checks_off():
+                    model.learn(timesteps, callback=CallbackList(callbacks))
             except INTERRUPTS as exc:
                 if not is_interrupt(exc):
                     raise
