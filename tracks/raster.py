@@ -527,25 +527,40 @@ def _raster_kernel(
 
 @njit(cache=True)
 def _paint_listed(tiles: np.ndarray, filled: np.ndarray, todo: np.ndarray,
+                  record: np.ndarray, n_record: np.ndarray,
                   intensity: np.ndarray, labels: np.ndarray, ox: float, oy: float, res: float,
                   x0: np.ndarray, y0: np.ndarray, h0: np.ndarray, kappa: np.ndarray,
                   length: np.ndarray, s0: np.ndarray, total: float, closed: bool,
                   lane_w: float, line_w: float, dash: float, period: float,
                   gap_line: np.ndarray, gap_lo: np.ndarray, gap_hi: np.ndarray,
                   passes: np.ndarray, start_s: float, start_w: float, stop_w: float,
-                  chunk_m: float, boxes: np.ndarray, tile: int, with_labels: bool) -> None:
-    """Paint the listed tiles (indices into the flat ``filled``, in range, not painted
-    yet) in one call: marked in ``todo`` (the kernel's mask, all 0 between calls),
-    painted (``_raster_kernel``), unmarked and set in ``filled``."""
+                  chunk_m: float, boxes: np.ndarray, tile: int, with_labels: bool) -> int:
+    """Paint the listed tiles (indices into the flat ``filled``; ones past its end are
+    skipped: a scene's list of the tiles of all its levels, level 0 first and numbered
+    as here) that are not painted yet, in one call: each marked in ``todo`` (the
+    kernel's mask, all 0 between calls) and appended to ``record[:n_record[0]]`` (the
+    painted tiles, recorded before they are painted: no Ctrl-C can land in between),
+    then painted (``_raster_kernel``), unmarked and set in ``filled``. A tile listed
+    twice is painted and recorded once. Returns how many were painted."""
     mask = todo.reshape(-1)
+    start = n_record[0]
+    m = start
     for k in range(len(tiles)):
-        mask[tiles[k]] = 1
+        index = tiles[k]
+        if index < len(filled) and not filled[index] and not mask[index]:
+            mask[index] = 1
+            record[m] = index
+            m += 1
+    n_record[0] = m
+    if m == start:
+        return 0
     _raster_kernel(intensity, labels, ox, oy, res, x0, y0, h0, kappa, length, s0, total,
                    closed, lane_w, line_w, dash, period, gap_line, gap_lo, gap_hi, passes,
                    start_s, start_w, stop_w, chunk_m, boxes, todo, tile, with_labels)
-    for k in range(len(tiles)):
-        mask[tiles[k]] = 0
-        filled[tiles[k]] = 1
+    for k in range(start, m):
+        mask[record[k]] = 0
+        filled[record[k]] = 1
+    return m - start
 
 
 _LINE_INDEX = {"right": 0, "centre": 1, "left": 2}
@@ -729,7 +744,10 @@ class TiledMarkingMap:
         self.labels = untouched_zeros((n_rows, n_cols)) if labels else None
         self.filled = np.zeros((-(-n_rows // tile_px), -(-n_cols // tile_px)), np.uint8)
         self._todo = np.zeros_like(self.filled)  # the kernel's tiles to paint: all 0 between calls
-        self._painted: list[np.ndarray] = []  # the tiles painted, call by call
+        # The tiles painted, in order: ``_record[:_n_record[0]]``, appended to by the kernel
+        # (a tile is painted once until ``detach``, so the grid's size is room enough).
+        self._record = np.empty(self.filled.size, np.int64)
+        self._n_record = np.zeros(1, np.int64)
         self._boxes: np.ndarray | None = None  # ``_chunk_boxes``, on the first fill
         t = track.table
         gaps = track.gaps
@@ -763,7 +781,7 @@ class TiledMarkingMap:
         if self.labels is not None:
             self.labels = untouched_zeros(self.shape)
         self.filled[:] = 0
-        self._painted = []
+        self._n_record[0] = 0
 
     def fill(self, tiles: np.ndarray) -> None:
         """Paint the tiles marked in ``tiles`` (a mask shaped like ``filled``) that are not
@@ -787,26 +805,37 @@ class TiledMarkingMap:
         if len(tiles) and not (tiles.min() >= 0 and tiles.max() < len(flat)):
             raise IndexError(f"a listed tile is outside the map's tile grid of {len(flat)} "
                              "tiles")
-        todo = tiles[flat[tiles] == 0].astype(np.int64, copy=False)
-        if not len(todo):
-            return
+        self.paint_level0(tiles.astype(np.int64, copy=False))
+
+    def paint_level0(self, tiles: np.ndarray) -> int:
+        """``fill_listed`` for a caller that vouches for its list (a lazy scene, every
+        frame): an int64 1-D array, unchecked; indices past the grid are skipped (a
+        scene's list of its levels' tiles: level 0 first, numbered as here). Returns how
+        many tiles were painted."""
         if self._boxes is None:
             ox, oy, res, x0, y0, h0, kappa, length = self._args[:8]
             lane_w, line_w, chunk_m = self._args[11], self._args[12], self._args[-1]
             self._boxes = _chunk_boxes(*self.shape, ox, oy, res, x0, y0, h0, kappa, length,
                                        lane_w, line_w, chunk_m)
-        # Recorded before they are painted: a Ctrl-C raised as the kernel returns must not
-        # leave painted tiles that ``painted_tiles`` (a retiring scene's zeroing) misses.
-        self._painted.append(todo)
-        labels = self.labels if self.labels is not None else _NO_LABELS
-        _paint_listed(todo, flat, self._todo, self.intensity, labels, *self._args,
-                      self._boxes, self.tile_px, self.labels is not None)
+        return _paint_listed(tiles, self.filled.reshape(-1), self._todo, self._record,
+                             self._n_record, self.intensity,
+                             self.labels if self.labels is not None else _NO_LABELS,
+                             *self._args, self._boxes, self.tile_px, self.labels is not None)
 
     def painted_tiles(self) -> np.ndarray:
-        """The painted tiles' indices into ``filled`` (row-major), without a scan of it."""
-        if len(self._painted) > 1:
-            self._painted = [np.concatenate(self._painted)]
-        return self._painted[0] if self._painted else np.zeros(0, np.int64)
+        """The painted tiles' indices into ``filled`` (row-major, each once), in the order
+        they were painted, without a scan of it."""
+        return self._record[:self._n_record[0]].copy()
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        if "_painted" in state:  # pickled before the record array: a list of arrays
+            painted = self.__dict__.pop("_painted")
+            listed = np.concatenate(painted) if painted else np.zeros(0, np.int64)
+            listed = listed[np.sort(np.unique(listed, return_index=True)[1])]
+            self._record = np.empty(self.filled.size, np.int64)
+            self._record[:len(listed)] = listed
+            self._n_record = np.array([len(listed)], np.int64)
 
     def fill_all(self) -> MarkingMap:
         """Paint every tile; the whole map (one without labels is no ``MarkingMap``)."""

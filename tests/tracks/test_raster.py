@@ -145,7 +145,8 @@ def test_tile_wise_raster_equals_whole_raster() -> None:
 
 def test_fill_listed_paints_the_listed_tiles_once_and_refuses_others() -> None:
     """``fill_listed`` paints what is listed and not painted yet (a tile listed twice in a
-    call is painted once; one painted already is neither painted nor recorded again),
+    call is painted and recorded once; one painted already is neither painted nor
+    recorded again),
     leaves the kernel's mask clear, and refuses indices outside the tile grid and arrays
     that are no 1-D int lists before it paints or records anything."""
     from tfalda_sim.tracks.raster import TiledMarkingMap
@@ -161,7 +162,7 @@ def test_fill_listed_paints_the_listed_tiles_once_and_refuses_others() -> None:
     assert np.flatnonzero(tiled.filled).tolist() == sorted({int(t) for t in some})
     assert not tiled._todo.any()
     tiled.fill_listed(some[:1])  # painted already: nothing recorded
-    assert sorted(set(tiled.painted_tiles().tolist())) == sorted({int(t) for t in some})
+    assert tiled.painted_tiles().tolist() == [int(painted[0]), int(painted[1])]
     before = tiled.intensity.copy()
     for bad, error in ((np.array([painted[2], grid]), IndexError),
                        (np.array([painted[2], -1]), IndexError),
@@ -171,7 +172,32 @@ def test_fill_listed_paints_the_listed_tiles_once_and_refuses_others() -> None:
             tiled.fill_listed(bad)
     assert tiled.filled.sum() == 2 and not tiled._todo.any()
     assert np.array_equal(tiled.intensity, before)
-    assert len(tiled.painted_tiles()) == 3  # the refused calls recorded nothing
+    assert len(tiled.painted_tiles()) == 2  # the refused calls recorded nothing
+
+
+def test_paint_level0_skips_tiles_past_the_grid_and_old_pickles_keep_their_record() -> None:
+    """A scene hands the map its list of all levels' tiles (level 0 first): indices past
+    the map's grid are skipped. A map pickled with the older list of painted arrays
+    (duplicates across calls possible) restores its record, each tile once, in order."""
+    import pickle
+
+    from tfalda_sim.tracks.raster import TiledMarkingMap
+
+    track = load_named("oval")
+    tiled = TiledMarkingMap(track, labels=False)
+    grid = tiled.filled.size
+    road = np.flatnonzero(rasterize(track).intensity[::tiled.tile_px, ::tiled.tile_px])
+    assert tiled.paint_level0(np.array([road[0], road[1], grid, grid + 7], np.int64)) == 2
+    assert tiled.painted_tiles().tolist() == [road[0], road[1]]
+    assert tiled.paint_level0(np.array([road[1], grid], np.int64)) == 0
+    state = pickle.loads(pickle.dumps(tiled)).__dict__
+    del state["_record"], state["_n_record"]
+    state["_painted"] = [np.array([road[1], road[0]]), np.array([road[0], road[2]])]
+    old = TiledMarkingMap.__new__(TiledMarkingMap)
+    old.__setstate__(state)
+    assert old.painted_tiles().tolist() == [road[1], road[0], road[2]]
+    old.fill_listed(np.array([road[3]]))
+    assert old.painted_tiles().tolist() == [road[1], road[0], road[2], road[3]]
 
 
 def test_a_map_without_labels_paints_the_same_intensity() -> None:

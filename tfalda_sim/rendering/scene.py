@@ -271,12 +271,15 @@ def _needed_tiles(bounds: np.ndarray, affines: np.ndarray, size0_x: float, size0
 
 @njit(cache=True)
 def _store_level0(atlas: np.ndarray, guard: int, intensity: np.ndarray, wear: np.ndarray,
-                  use_wear: bool, level0: np.ndarray, grid_cols: int, t: int) -> None:
-    """Copy the level-0 tiles listed in ``level0`` (numbered row-major, ``grid_cols`` a
-    row) of the marking map into the atlas, worn as ``build_scene`` wears them:
-    ``rint(paint × remaining)`` in float32."""
+                  use_wear: bool, queue: np.ndarray, n_level0: int, grid_cols: int, t: int
+                  ) -> None:
+    """Copy the level-0 tiles listed in ``queue`` (those below ``n_level0``, numbered
+    row-major, ``grid_cols`` a row) of the marking map into the atlas, worn as
+    ``build_scene`` wears them: ``rint(paint × remaining)`` in float32."""
     rows, cols = intensity.shape
-    for index in level0:
+    for index in queue:
+        if index >= n_level0:
+            continue
         tr, tc = divmod(index, grid_cols)
         for r in range(tr * t, min((tr + 1) * t, rows)):
             for c in range(tc * t, min((tc + 1) * t, cols)):
@@ -310,13 +313,13 @@ def _mip_tiles(atlas: np.ndarray, origins: np.ndarray, tiles: np.ndarray, sizes:
 
 
 @njit(cache=True)
-def _finish_fill(atlas: np.ndarray, origins: np.ndarray, queue: np.ndarray, n0: int,
+def _finish_fill(atlas: np.ndarray, origins: np.ndarray, queue: np.ndarray,
                  sizes: np.ndarray, tile: np.ndarray, grids: np.ndarray, offsets: np.ndarray,
                  filled: np.ndarray, need: np.ndarray) -> None:
-    """The last step of a fill, in one call: ``_mip_tiles`` of the queue's tiles past its
-    ``n0`` of level 0 (painted already), then every listed tile marked filled and no
+    """The last step of a fill, in one call: ``_mip_tiles`` of the queue's tiles of
+    levels 1… (level 0 is painted already), then every listed tile marked filled and no
     longer needed."""
-    _mip_tiles(atlas, origins, queue[n0:], sizes, tile, grids, offsets)
+    _mip_tiles(atlas, origins, queue, sizes, tile, grids, offsets)
     for index in queue:
         filled[index] = 1
         need[index] = 0
@@ -375,7 +378,7 @@ class MipTiles:
         self.grids = -(-self.sizes // self.tile[:, None])
         counts = self.grids[:, 0] * self.grids[:, 1]
         self.offsets = np.concatenate(([0], np.cumsum(counts)[:-1])).astype(np.int64)
-        self._level0_tiles = int(counts[0])  # a Python int: a cheap searchsorted key
+        self._level0_tiles = int(counts[0])
         self.filled = np.zeros(int(counts.sum()), np.uint8)
         self.need = np.zeros_like(self.filled)
         self.n_filled = 0
@@ -510,17 +513,18 @@ class MipTiles:
     def _fill_queued(self, queue: np.ndarray) -> None:
         """Paint and filter the listed tiles (sorted: level 0 first), then mark them
         filled."""
-        n0 = int(queue.searchsorted(self._level0_tiles))
-        level0 = queue[:n0]  # level 0 is numbered first, as the marking map's tiles
-        self.marking.fill_listed(level0)
+        # Level 0 is numbered first, as the marking map's tiles: the map and the kernels
+        # below pick their tiles from the whole list (no split in Python: µs a frame).
+        self.marking.paint_level0(queue)
         if not self.level0_in_atlas:
             use_wear = self._worn is not None
             if use_wear and self._remaining is None:
                 self._remaining = _wear_remaining(self._worn, self.marking.shape)
             remaining = self._remaining if use_wear else np.ones((1, 1), np.float32)
             _store_level0(self.atlas, ATLAS_GUARD, self.marking.intensity, remaining,
-                          use_wear, level0, int(self.grids[0, 1]), int(self.tile[0]))
-        _finish_fill(self.atlas, self.origins, queue, n0, self.sizes, self.tile, self.grids,
+                          use_wear, queue, self._level0_tiles, int(self.grids[0, 1]),
+                          int(self.tile[0]))
+        _finish_fill(self.atlas, self.origins, queue, self.sizes, self.tile, self.grids,
                      self.offsets, self.filled, self.need)
 
 
