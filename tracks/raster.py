@@ -547,7 +547,7 @@ def _paint_listed(tiles: np.ndarray, filled: np.ndarray, todo: np.ndarray,
     m = start
     for k in range(len(tiles)):
         index = tiles[k]
-        if index < len(filled) and not filled[index] and not mask[index]:
+        if 0 <= index < len(filled) and not filled[index] and not mask[index]:
             mask[index] = 1
             record[m] = index
             m += 1
@@ -829,13 +829,21 @@ class TiledMarkingMap:
 
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__dict__.update(state)
-        if "_painted" in state:  # pickled before the record array: a list of arrays
-            painted = self.__dict__.pop("_painted")
-            listed = np.concatenate(painted) if painted else np.zeros(0, np.int64)
+        if "_record" not in state:
+            # Pickled before the record array: with a list of arrays ("_painted"), which
+            # may hold a tile twice or one a Ctrl-C kept from being painted, or before
+            # that with no list at all. The record holds each filled tile once (what the
+            # kernel relies on to stay inside it), listed ones first, in their order.
+            painted = self.__dict__.pop("_painted", [])
+            listed = np.concatenate(painted).astype(np.int64) if painted else np.zeros(0, np.int64)
+            flat = self.filled.reshape(-1)
+            listed = listed[(listed >= 0) & (listed < len(flat))]
+            listed = listed[flat[listed] != 0]
             listed = listed[np.sort(np.unique(listed, return_index=True)[1])]
-            self._record = np.empty(self.filled.size, np.int64)
-            self._record[:len(listed)] = listed
-            self._n_record = np.array([len(listed)], np.int64)
+            rest = np.setdiff1d(np.flatnonzero(flat), listed)
+            self._record = np.empty(flat.size, np.int64)
+            self._n_record = np.array([len(listed) + len(rest)], np.int64)
+            self._record[:self._n_record[0]] = np.concatenate((listed, rest))
 
     def fill_all(self) -> MarkingMap:
         """Paint every tile; the whole map (one without labels is no ``MarkingMap``)."""

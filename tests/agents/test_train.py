@@ -127,11 +127,19 @@ def test_ppo_agent_acts_the_same_with_the_checks_off_and_restores_them() -> None
     agent = PpoAgent(DEFAULT_POLICY)
     env = TfaldaTrackEnv(track="oval")
     obs, _ = env.reset(seed=0)
+    seen: list[bool] = []
+    predict = agent.model.predict
+
+    def spy(*args, **kwargs):
+        seen.append(Distribution._validate_args)
+        return predict(*args, **kwargs)
+
+    agent.model.predict = spy
     before = Distribution._validate_args
     try:
         Distribution.set_default_validate_args(True)
         fast = agent.act(obs)
-        assert Distribution._validate_args is True
+        assert seen == [False] and Distribution._validate_args is True
         with torch.no_grad():
             tensor, _ = agent.model.policy.obs_to_tensor(obs)
             mean = agent.model.policy.get_distribution(tensor).mode()  # checks on

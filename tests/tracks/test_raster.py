@@ -177,8 +177,9 @@ def test_fill_listed_paints_the_listed_tiles_once_and_refuses_others() -> None:
 
 def test_paint_level0_skips_tiles_past_the_grid_and_old_pickles_keep_their_record() -> None:
     """A scene hands the map its list of all levels' tiles (level 0 first): indices past
-    the map's grid are skipped. A map pickled with the older list of painted arrays
-    (duplicates across calls possible) restores its record, each tile once, in order."""
+    the map's grid (and negative ones) are skipped. A map pickled with the older list of
+    painted arrays (a tile twice, or one a Ctrl-C kept from being painted) or with no list
+    restores its record: each painted tile once, in order."""
     import pickle
 
     from tfalda_sim.tracks.raster import TiledMarkingMap
@@ -187,17 +188,26 @@ def test_paint_level0_skips_tiles_past_the_grid_and_old_pickles_keep_their_recor
     tiled = TiledMarkingMap(track, labels=False)
     grid = tiled.filled.size
     road = np.flatnonzero(rasterize(track).intensity[::tiled.tile_px, ::tiled.tile_px])
-    assert tiled.paint_level0(np.array([road[0], road[1], grid, grid + 7], np.int64)) == 2
+    assert tiled.paint_level0(np.array([road[0], -1, road[1], grid, grid + 7], np.int64)) == 2
     assert tiled.painted_tiles().tolist() == [road[0], road[1]]
     assert tiled.paint_level0(np.array([road[1], grid], np.int64)) == 0
-    state = pickle.loads(pickle.dumps(tiled)).__dict__
-    del state["_record"], state["_n_record"]
-    state["_painted"] = [np.array([road[1], road[0]]), np.array([road[0], road[2]])]
+    def pickled_before() -> dict:  # a state of its own each time (arrays not shared)
+        state = pickle.loads(pickle.dumps(tiled)).__dict__
+        del state["_record"], state["_n_record"]
+        return state
+
+    # The older list: a tile twice, and one recorded but never painted (a Ctrl-C).
     old = TiledMarkingMap.__new__(TiledMarkingMap)
-    old.__setstate__(state)
-    assert old.painted_tiles().tolist() == [road[1], road[0], road[2]]
-    old.fill_listed(np.array([road[3]]))
+    old.__setstate__({**pickled_before(), "_painted": [np.array([road[1], road[0]]),
+                                            np.array([road[0], road[2]])]})
+    assert old.painted_tiles().tolist() == [road[1], road[0]]
+    old.fill_listed(np.array([road[2], road[3]]))
     assert old.painted_tiles().tolist() == [road[1], road[0], road[2], road[3]]
+    older = TiledMarkingMap.__new__(TiledMarkingMap)  # before any list: the filled tiles
+    older.__setstate__(pickled_before())
+    assert older.painted_tiles().tolist() == [road[0], road[1]]
+    old.fill(np.ones(old.filled.shape, bool))  # each tile recorded once: inside the record
+    assert sorted(old.painted_tiles().tolist()) == list(range(grid))
 
 
 def test_a_map_without_labels_paints_the_same_intensity() -> None:
