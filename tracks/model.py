@@ -389,6 +389,32 @@ class Track:
         t = self.table
         return s[extreme_sample_indices(t.s0, t.length, t.h0, t.kappa, total / n, len(s))]
 
+    @cached_property
+    def obstacle_corners_m(self) -> np.ndarray:
+        """``(n, 4, 2)`` world corners [m] of each obstacle's footprint, aligned with the
+        road (read-only): the box ``length_m`` × ``width_m`` centred in its lane, moved by
+        ``offset_m``. Computed once per track (the rules, the world and the renderer all
+        ask, each reset onto a new track), the poses in one call: numpy's vectorised
+        sine and cosine give each element the same bits whatever the array's length."""
+        obs = self.obstacles
+        out = np.zeros((len(obs), 4, 2))
+        if obs:
+            sign = [-1.0 if ob.lane.value == "right" else 1.0 for ob in obs]
+            xs, ys, hs = self.pose(
+                np.array([ob.s_m for ob in obs], np.float64),
+                np.array([sg * 0.5 * self.lane_width_m + ob.offset_m
+                          for sg, ob in zip(sign, obs, strict=True)], np.float64))
+            for k, ob in enumerate(obs):
+                x, y, h = float(xs[k]), float(ys[k]), float(hs[k])
+                t = np.array([math.cos(h), math.sin(h)])
+                n = np.array([-math.sin(h), math.cos(h)])
+                c = np.array([x, y])
+                hl, hw = 0.5 * ob.length_m, 0.5 * ob.width_m
+                out[k] = (c + hl * t + hw * n, c - hl * t + hw * n, c - hl * t - hw * n,
+                          c + hl * t - hw * n)
+        out.flags.writeable = False
+        return out
+
     # ----------------------------------------------------------- reverse query
     @cached_property
     def index(self) -> GridIndex:

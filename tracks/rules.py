@@ -431,17 +431,9 @@ def _check_obstacles(track: Track) -> list[Violation]:
 
 
 def obstacle_corners(track: Track, k: int) -> np.ndarray:
-    """World corners ``(4, 2)`` [m] of obstacle ``k``'s footprint, aligned with the road."""
-    ob = track.obstacles[k]
-    sign = -1.0 if ob.lane.value == "right" else 1.0
-    centre_d = sign * 0.5 * track.lane_width_m + ob.offset_m
-    x, y, h = (float(v) for v in track.pose(ob.s_m, centre_d))
-    t = np.array([math.cos(h), math.sin(h)])
-    n = np.array([-math.sin(h), math.cos(h)])
-    c = np.array([x, y])
-    hl, hw = 0.5 * ob.length_m, 0.5 * ob.width_m
-    return np.array([c + hl * t + hw * n, c - hl * t + hw * n, c - hl * t - hw * n,
-                     c + hl * t - hw * n])
+    """World corners ``(4, 2)`` [m] of obstacle ``k``'s footprint, aligned with the road
+    (a copy of ``Track.obstacle_corners_m[k]``)."""
+    return track.obstacle_corners_m[k].copy()
 
 
 def _check_start_line(track: Track) -> list[Violation]:

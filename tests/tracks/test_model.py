@@ -243,3 +243,32 @@ def test_every_track_field_is_road_or_element() -> None:
     road = {"segments", "closed", "start", "lane_width_m"}
     assert road | set(ELEMENT_FIELDS) == {f.name for f in dataclasses.fields(Track)}
     assert not road & set(ELEMENT_FIELDS)
+
+
+@pytest.mark.parametrize("seed", range(0, 40, 3))
+def test_obstacle_corners_are_each_obstacles_own_pose_read_only(seed: int) -> None:
+    """``Track.obstacle_corners_m`` takes the poses of all obstacles in one call: each
+    box equals the one made from that obstacle's own pose (the same bits), a box of
+    ``length_m`` × ``width_m`` about its lane's centre moved by ``offset_m``; the cached
+    array is read-only and ``rules.obstacle_corners`` hands out copies."""
+    from tfalda_sim.tracks.rules import obstacle_corners
+
+    track = generated(seed)
+    corners = track.obstacle_corners_m
+    assert corners.shape == (len(track.obstacles), 4, 2) and not corners.flags.writeable
+    for k, ob in enumerate(track.obstacles):
+        sign = -1.0 if ob.lane is Lane.RIGHT else 1.0
+        x, y, h = (float(v) for v in track.pose(ob.s_m, sign * 0.5 * track.lane_width_m
+                                                + ob.offset_m))
+        t = np.array([math.cos(h), math.sin(h)])
+        n = np.array([-math.sin(h), math.cos(h)])
+        c, hl, hw = np.array([x, y]), 0.5 * ob.length_m, 0.5 * ob.width_m
+        own = np.array([c + hl * t + hw * n, c - hl * t + hw * n, c - hl * t - hw * n,
+                        c + hl * t - hw * n])
+        assert np.array_equal(corners[k], own)
+        assert math.dist(own[0], own[1]) == pytest.approx(ob.length_m)
+        assert math.dist(own[1], own[2]) == pytest.approx(ob.width_m)
+        mine = obstacle_corners(track, k)
+        mine[:] = 0.0
+        assert np.array_equal(track.obstacle_corners_m[k], own)
+    assert sum(len(generated(s).obstacles) for s in range(0, 40, 3)) > 0
