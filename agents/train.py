@@ -216,7 +216,10 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
                 if bar is not None:
                     bar.close()
             elapsed = time.perf_counter() - t0
-            model.save(staging / "policy.zip")
+            # Into a file of our own: SB3 opens a path without closing it when an
+            # exception (a Ctrl-C) lands inside its writer, and the file leaks.
+            with (staging / "policy.zip").open("wb") as file:
+                model.save(file)
         finally:
             # Also after a Ctrl-C: the workers ignore it, and a worker that a cut message
             # leaves waiting is terminated after 5 s (TfaldaTrackVectorEnv.close).
