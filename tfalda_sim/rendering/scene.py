@@ -455,8 +455,7 @@ class MipTiles:
 
     def ensure(self, bounds: np.ndarray, affines: np.ndarray) -> None:
         """Fill what a view reads (``Scene.prepare``)."""
-        if self.retired:
-            raise RuntimeError(RETIRED_MESSAGE)
+        self._check_live()
         try:
             n = _needed_tiles(bounds, affines, *self._need_args)
             if n:
