@@ -520,10 +520,14 @@ def _lines(xs: np.ndarray, ys: np.ndarray, cos_t: np.ndarray, sin_t: np.ndarray,
         r = ys[sel[:count]].astype(np.int64)
         col = xs[sel[:count]].astype(np.int64)
         # sortrows([r c], [1 2]) when the rows span more than the columns, else [2 1]
+        # (the keys are distinct: any sort gives this order). Merge sort: numba names its
+        # quicksort helpers per process, so a cached argsort's could be linked to the
+        # in-place sort of another cached kernel (scene._propagate, np.unique) with the
+        # same name: it then returned garbage (tests/test_numba_sorts.py).
         if r.max() - r.min() > col.max() - col.min():
-            order = np.argsort(r * n_cols + col)
+            order = np.argsort(r * n_cols + col, kind="mergesort")
         else:
-            order = np.argsort(col * n_rows + r)
+            order = np.argsort(col * n_rows + r, kind="mergesort")
         r = r[order]
         col = col[order]
         start = 0
