@@ -143,6 +143,48 @@ def test_tile_wise_raster_equals_whole_raster() -> None:
             np.testing.assert_array_equal(full.labels, whole.labels)
 
 
+def _marked_rows(tiled, index: int) -> np.ndarray:
+    """The rows of tile ``index`` its row mask marks (bools, one per pixel row)."""
+    t = tiled.tile_px
+    tr = index // tiled.filled.shape[1]
+    n = min(t, tiled.shape[0] - tr * t)
+    mask = int(tiled.nonzero_rows[index])
+    return np.array([bool(mask & (1 << k)) if k < 64 else mask != 0 for k in range(n)])
+
+
+def test_row_masks_mark_every_row_with_paint() -> None:
+    """A painted tile's row mask marks every pixel row that holds paint (a lazy scene
+    neither reads nor clears the others), and not many more; unpainted tiles have none.
+    Tracks with cartons, gaps, crossings and a start line; tiles of 64 px and of 57 (a
+    row past a mask's 64 bits, with 96 px tiles, marks the whole tile)."""
+    from tests.conftest import generated
+    from tfalda_sim.tracks.raster import TiledMarkingMap
+
+    rng = np.random.default_rng(1)
+    eight = next(generated(s) for s in range(100) if generated(s).intersections)
+    marked_total = painted_total = 0
+    for track in (generated(2), eight, load_named("thesis"), strip(0.37)):
+        for tile_px in (64, 57, 96):
+            tiled = TiledMarkingMap(track, tile_px=tile_px, labels=tile_px != 64)
+            tiled.fill(rng.random(tiled.filled.shape) < 0.4)
+            flat = tiled.filled.reshape(-1)
+            assert not tiled.nonzero_rows[flat == 0].any()
+            for index in np.flatnonzero(flat):
+                tr, tc = divmod(int(index), tiled.filled.shape[1])
+                block = tiled.intensity[tr * tile_px:(tr + 1) * tile_px,
+                                        tc * tile_px:(tc + 1) * tile_px]
+                painted = block.any(axis=1)
+                marked = _marked_rows(tiled, int(index))
+                assert not (painted & ~marked).any(), (track.name, tile_px, index)
+                if tile_px <= 64:
+                    marked_total += int(marked.sum())
+                    painted_total += int(painted.sum())
+    assert painted_total > 1000
+    # A mask marks the rows its spans visit: a few more than hold paint (1.23× here);
+    # a tile marked whole would be 3× and more.
+    assert marked_total <= 1.5 * painted_total
+
+
 def test_fill_listed_paints_the_listed_tiles_once_and_refuses_others() -> None:
     """``fill_listed`` paints what is listed and not painted yet (a tile listed twice in a
     call is painted and recorded once; one painted already is neither painted nor
@@ -193,7 +235,7 @@ def test_paint_level0_skips_tiles_past_the_grid_and_old_pickles_keep_their_recor
     assert tiled.paint_level0(np.array([road[1], grid], np.int64)) == 0
     def pickled_before() -> dict:  # a state of its own each time (arrays not shared)
         state = pickle.loads(pickle.dumps(tiled)).__dict__
-        del state["_record"], state["_n_record"]
+        del state["_record"], state["_n_record"], state["nonzero_rows"]
         return state
 
     # The older list: a tile twice, and one recorded but never painted (a Ctrl-C).
@@ -206,6 +248,10 @@ def test_paint_level0_skips_tiles_past_the_grid_and_old_pickles_keep_their_recor
     older = TiledMarkingMap.__new__(TiledMarkingMap)  # before any list: the filled tiles
     older.__setstate__(pickled_before())
     assert older.painted_tiles().tolist() == [road[0], road[1]]
+    # Before the row masks: every row of every tile may hold paint; a tile painted after
+    # the load gets its own.
+    assert (older.nonzero_rows == -1).all()
+    assert old.nonzero_rows[road[0]] == -1 and old.nonzero_rows[road[3]] not in (0, -1)
     old.fill(np.ones(old.filled.shape, bool))  # each tile recorded once: inside the record
     assert sorted(old.painted_tiles().tolist()) == list(range(grid))
 

@@ -24,6 +24,7 @@ from tfalda_sim.tracks.raster import (
     TiledMarkingMap,
     map_geometry,
     memory_of,
+    row_bit,
     untouched_zeros,
 )
 from tfalda_sim.tracks.rules import obstacle_corners
@@ -271,17 +272,24 @@ def _needed_tiles(bounds: np.ndarray, affines: np.ndarray, size0_x: float, size0
 
 @njit(cache=True)
 def _store_level0(atlas: np.ndarray, guard: int, intensity: np.ndarray, wear: np.ndarray,
-                  use_wear: bool, queue: np.ndarray, n_level0: int, grid_cols: int, t: int
-                  ) -> None:
+                  use_wear: bool, queue: np.ndarray, n_level0: int, grid_cols: int, t: int,
+                  painted_rows: np.ndarray, nonzero_rows: np.ndarray) -> None:
     """Copy the level-0 tiles listed in ``queue`` (those below ``n_level0``, numbered
     row-major, ``grid_cols`` a row) of the marking map into the atlas, worn as
-    ``build_scene`` wears them: ``rint(paint × remaining)`` in float32."""
+    ``build_scene`` wears them: ``rint(paint × remaining)`` in float32. Only the rows
+    that may hold paint (``painted_rows``, the map's ``nonzero_rows``) are copied: the
+    others are zeros in the map and in the atlas alike; ``nonzero_rows`` (the scene's)
+    gets the same bits."""
     rows, cols = intensity.shape
     for index in queue:
         if index >= n_level0:
             continue
         tr, tc = divmod(index, grid_cols)
+        painted = painted_rows[index]
+        nonzero_rows[index] = painted
         for r in range(tr * t, min((tr + 1) * t, rows)):
+            if not painted & row_bit(r - tr * t):
+                continue
             for c in range(tc * t, min((tc + 1) * t, cols)):
                 v = intensity[r, c]
                 if use_wear:
@@ -290,11 +298,22 @@ def _store_level0(atlas: np.ndarray, guard: int, intensity: np.ndarray, wear: np
 
 
 @njit(cache=True)
+def _tile_rows(index: int, offsets: np.ndarray, rows0: np.ndarray, rows: np.ndarray) -> int:
+    """The row mask of tile ``index`` (``TiledMarkingMap.nonzero_rows``' bits): from
+    ``rows0`` for level 0 (its tiles are numbered first), else from ``rows``."""
+    return rows0[index] if index < len(rows0) else rows[index]
+
+
+@njit(cache=True)
 def _mip_tiles(atlas: np.ndarray, origins: np.ndarray, tiles: np.ndarray, sizes: np.ndarray,
-               tile: np.ndarray, grids: np.ndarray, offsets: np.ndarray) -> None:
+               tile: np.ndarray, grids: np.ndarray, offsets: np.ndarray, rows0: np.ndarray,
+               rows: np.ndarray) -> None:
     """The listed tiles of levels 1… (``tiles``, sorted: a level after the one below) as
     2×2 box averages of the level below, rounded like OpenCV's INTER_AREA halving:
-    ``(a + b + c + d + 2) >> 2``."""
+    ``(a + b + c + d + 2) >> 2``. A row whose two rows below hold only zeros is zero and
+    left as it is (the atlas holds zeros there: the row masks ``rows0`` of level 0,
+    ``rows`` of the others, which get each tile's bits here; a tile of 1 texel covers
+    more than one below, and is marked whole)."""
     for index in tiles:
         lv = _tile_level(index, offsets)
         if lv == 0:
@@ -303,23 +322,35 @@ def _mip_tiles(atlas: np.ndarray, origins: np.ndarray, tiles: np.ndarray, sizes:
         t = tile[lv]
         sx, sy = origins[lv - 1, 0], origins[lv - 1, 1]
         dx, dy = origins[lv, 0], origins[lv, 1]
+        # The tile below (the same ground) when it has twice the rows; else unknown.
+        below = np.int64(-1)
+        if tile[lv - 1] == 2 * t:
+            below = _tile_rows(offsets[lv - 1] + tr * grids[lv - 1, 1] + tc, offsets, rows0,
+                               rows)
+        mask = np.int64(0)
         for r in range(tr * t, min((tr + 1) * t, sizes[lv, 0])):
+            k = r - tr * t
+            if not below & (row_bit(2 * k) | row_bit(2 * k + 1)):
+                continue
+            mask |= row_bit(k)
             for c in range(tc * t, min((tc + 1) * t, sizes[lv, 1])):
                 a = (np.int32(atlas[sy + 2 * r, sx + 2 * c])
                      + np.int32(atlas[sy + 2 * r, sx + 2 * c + 1])
                      + np.int32(atlas[sy + 2 * r + 1, sx + 2 * c])
                      + np.int32(atlas[sy + 2 * r + 1, sx + 2 * c + 1]))
                 atlas[dy + r, dx + c] = np.uint8((a + 2) >> 2)
+        rows[index] = mask
 
 
 @njit(cache=True)
 def _finish_fill(atlas: np.ndarray, origins: np.ndarray, queue: np.ndarray,
                  sizes: np.ndarray, tile: np.ndarray, grids: np.ndarray, offsets: np.ndarray,
-                 filled: np.ndarray, need: np.ndarray) -> None:
+                 filled: np.ndarray, need: np.ndarray, rows0: np.ndarray, rows: np.ndarray
+                 ) -> None:
     """The last step of a fill, in one call: ``_mip_tiles`` of the queue's tiles of
     levels 1… (level 0 is painted already), then every listed tile marked filled and no
     longer needed."""
-    _mip_tiles(atlas, origins, queue, sizes, tile, grids, offsets)
+    _mip_tiles(atlas, origins, queue, sizes, tile, grids, offsets, rows0, rows)
     for index in queue:
         filled[index] = 1
         need[index] = 0
@@ -327,15 +358,20 @@ def _finish_fill(atlas: np.ndarray, origins: np.ndarray, queue: np.ndarray,
 
 @njit(cache=True)
 def _zero_tiles(atlas: np.ndarray, origins: np.ndarray, tiles: np.ndarray, sizes: np.ndarray,
-                tile: np.ndarray, grids: np.ndarray, offsets: np.ndarray) -> None:
-    """Zero the listed tiles (of any level) in the atlas."""
+                tile: np.ndarray, grids: np.ndarray, offsets: np.ndarray, rows0: np.ndarray,
+                rows: np.ndarray) -> None:
+    """Zero the listed tiles (of any level) in the atlas: the rows their masks mark
+    (``rows0`` for level 0, ``rows`` for the others); the other rows hold zeros."""
     for index in tiles:
         lv = _tile_level(index, offsets)
         tr, tc = divmod(index - offsets[lv], grids[lv, 1])
         t = tile[lv]
         x, y = origins[lv, 0], origins[lv, 1]
-        atlas[y + tr * t:y + min((tr + 1) * t, sizes[lv, 0]),
-              x + tc * t:x + min((tc + 1) * t, sizes[lv, 1])] = 0
+        mask = _tile_rows(index, offsets, rows0, rows)
+        c0, c1 = x + tc * t, x + min((tc + 1) * t, sizes[lv, 1])
+        for r in range(tr * t, min((tr + 1) * t, sizes[lv, 0])):
+            if mask & row_bit(r - tr * t):
+                atlas[y + r, c0:c1] = 0
 
 
 RETIRED_MESSAGE = ("this scene was retired: build_scene(reuse=scene) handed its memory to a "
@@ -381,6 +417,10 @@ class MipTiles:
         self._level0_tiles = int(counts[0])
         self.filled = np.zeros(int(counts.sum()), np.uint8)
         self.need = np.zeros_like(self.filled)
+        # Per tile a bit per texel row that may be non-zero (``row_bit``); the rest of a
+        # tile is zeros, neither read for the levels above nor cleared by ``retire``.
+        # Level 0 painted in the atlas: the marking map's (``_level0_rows``).
+        self.nonzero_rows = np.zeros(len(self.filled), np.int64)
         self.n_filled = 0
         self._queue = np.empty(len(self.filled), np.int64)  # scratch: the tiles to fill
         self._need_args = self._needed_tiles_args()
@@ -409,6 +449,8 @@ class MipTiles:
         self.__dict__.update(state)
         self._queue = np.empty(len(self.filled), np.int64)
         self._level0_tiles = int(self.grids[0, 0] * self.grids[0, 1])  # pickled before it
+        if "nonzero_rows" not in state:  # pickled before the row masks: every row may
+            self.nonzero_rows = np.full(len(self.filled), -1, np.int64)  # be non-zero
         if "n_filled" not in state:  # pickled before the fill lists
             self.n_filled = int(np.count_nonzero(self.filled))
             self._written_runs = [np.flatnonzero(self.filled)]
@@ -417,6 +459,13 @@ class MipTiles:
             g, (rows, cols) = ATLAS_GUARD, self.marking.shape
             self.marking.intensity = self.atlas[g:g + rows, g:g + cols]
         self._need_args = self._needed_tiles_args()
+
+    def _level0_rows(self) -> np.ndarray:
+        """The row masks of level 0: the marking map's if it paints into the atlas (it
+        marks what it paints there, for other scenes too), else this scene's own."""
+        if self.level0_in_atlas:
+            return self.marking.nonzero_rows
+        return self.nonzero_rows[:self._level0_tiles]
 
     def retire(self) -> mmap.mmap | None:
         """Hand this scene's memory over to a new scene (``build_scene(reuse=…)``): zero
@@ -431,7 +480,8 @@ class MipTiles:
         memory = memory_of(self.atlas)
         if memory is None:
             return None
-        args = (self.sizes, self.tile, self.grids, self.offsets)
+        args = (self.sizes, self.tile, self.grids, self.offsets, self._level0_rows(),
+                self.nonzero_rows)
         # Lists, not scans of ``filled`` (~10⁵ tiles): each fill's tiles; level 0 also
         # holds what a map painting into it painted for other scenes. One call: a kernel
         # call from Python costs µs, and a scene has had ~30 fills.
@@ -530,9 +580,10 @@ class MipTiles:
             remaining = self._remaining if use_wear else np.ones((1, 1), np.float32)
             _store_level0(self.atlas, ATLAS_GUARD, self.marking.intensity, remaining,
                           use_wear, queue, self._level0_tiles, int(self.grids[0, 1]),
-                          int(self.tile[0]))
+                          int(self.tile[0]), self.marking.nonzero_rows, self.nonzero_rows)
         _finish_fill(self.atlas, self.origins, queue, self.sizes, self.tile, self.grids,
-                     self.offsets, self.filled, self.need)
+                     self.offsets, self.filled, self.need, self._level0_rows(),
+                     self.nonzero_rows)
 
 
 def _blobs(rng: np.random.Generator, shape: tuple[int, int], count: int,

@@ -128,7 +128,8 @@ def _fill_listed(t: MipTiles, atlas: np.ndarray, filled: np.ndarray, need: np.nd
     n = _propagate(queue, len(listed), need, filled, t.sizes, t.tile, t.grids, t.offsets)
     assert np.all(np.diff(queue[:n]) > 0)  # sorted, each tile once
     assert set(queue[:n]) == set(np.flatnonzero(need))
-    _mip_tiles(atlas, t.origins, queue[:n], t.sizes, t.tile, t.grids, t.offsets)
+    _mip_tiles(atlas, t.origins, queue[:n], t.sizes, t.tile, t.grids, t.offsets,
+               t.nonzero_rows[:t.grids[0, 0] * t.grids[0, 1]], t.nonzero_rows)
     filled[queue[:n]] = 1
 
 
@@ -139,6 +140,7 @@ def test_tile_wise_mips_equal_whole_mips() -> None:
     for shape0 in ((300, 517), (257, 129), (64, 64), (1000, 333)):
         level0 = rng.integers(0, 256, shape0, dtype=np.uint8)
         level0[rng.random(shape0) < 0.5] = 0  # runs of mat, as on a map
+        level0[rng.random(shape0[0]) < 0.6] = 0  # rows of mat: the masks skip them
         wall = rng.integers(0, 256, (20, 40), dtype=np.uint8)
         eager, origins, wall_origin = _atlas(level0, wall)
         (height, width), sizes, level_xy, wall_xy = _atlas_layout(shape0, wall.shape)
@@ -158,6 +160,17 @@ def test_tile_wise_mips_equal_whole_mips() -> None:
             t.offsets = np.concatenate(([0], np.cumsum(counts)[:-1])).astype(np.int64)
             filled = np.zeros(int(counts.sum()), np.uint8)
             filled[:counts[0]] = 1  # level 0 is there
+            # its row masks, exact (each non-zero row's bit): the levels above skip the
+            # zero rows and must still equal the whole-level halving
+            t.nonzero_rows = np.zeros(len(filled), np.int64)
+            nonzero = (level0 != 0).any(axis=1)
+            for index in range(int(counts[0])):
+                tr = index // int(t.grids[0, 1])
+                for k, row in enumerate(range(tr * tile0, min((tr + 1) * tile0, shape0[0]))):
+                    tc = index % int(t.grids[0, 1])
+                    if level0[row, tc * tile0:(tc + 1) * tile0].any():
+                        t.nonzero_rows[index] |= np.int64(1) << k
+            assert nonzero.any() and not nonzero.all()
             for _ in range(3):  # random batches of the coarsest level's tiles
                 need = np.zeros_like(filled)
                 top = len(sizes) - 1
@@ -490,3 +503,103 @@ def test_a_ctrl_c_as_a_fill_kernel_returns_leaves_consistent_state(
                          renderer.render_windows(eager, pose, ROIS, frame_seed=1), strict=True):
         np.testing.assert_array_equal(got, want)
     assert t.n_filled == np.count_nonzero(t.filled) > 0 and not t.need.any()
+
+
+def _tile_rows_of(t: MipTiles, index: int) -> np.ndarray:
+    """The atlas rows ``(level, rows [texels], columns slice, marked)`` of tile ``index``."""
+    lv = int(np.searchsorted(t.offsets, index, side="right") - 1)
+    tr, tc = divmod(index - int(t.offsets[lv]), int(t.grids[lv, 1]))
+    size = int(t.tile[lv])
+    x, y = (int(v) for v in t.origins[lv])
+    n_rows = min(size, int(t.sizes[lv, 0]) - tr * size)
+    cols = slice(x + tc * size, x + min((tc + 1) * size, int(t.sizes[lv, 1])))
+    mask = int(t._level0_rows()[index] if lv == 0 else t.nonzero_rows[index])
+    marked = np.array([bool(mask & (1 << k)) if k < 64 else mask != 0 for k in range(n_rows)])
+    return lv, np.arange(y + tr * size, y + tr * size + n_rows), cols, marked
+
+
+@pytest.mark.parametrize("kind", ["default", "randomised"])
+def test_row_masks_of_every_level_cover_its_non_zero_rows(renderer: Renderer,
+                                                          kind: str) -> None:
+    """After views of a lazy scene (level 0 painted in the atlas, or worn and copied in),
+    every filled tile of every level holds zeros in the rows its mask leaves unmarked
+    (the mips skip reading them, ``retire`` skips clearing them), and the masks leave
+    most rows of the tiles a view fills unmarked."""
+    track = replace(generated(14), name=f"row masks {kind}")
+    fx, scene_seed = _effects(kind, 14)
+    lazy = build_scene(track, fx, np.random.default_rng(scene_seed))
+    for k, pose in enumerate(_poses(track, 5, 14)):
+        renderer.render_windows(lazy, pose, ROIS, frame_seed=k)
+    t = lazy.tiles
+    assert t.level0_in_atlas == (kind == "default")
+    unmarked = marked = 0
+    levels = set()
+    for index in np.flatnonzero(t.filled):
+        lv, rows, cols, keep = _tile_rows_of(t, int(index))
+        block = lazy.atlas[rows, cols]
+        assert not block[~keep].any(), (lv, index)
+        unmarked += int((~keep).sum())
+        marked += int(keep.sum())
+        levels.add(lv)
+    assert {0, 1, 2} <= levels
+    assert unmarked > marked  # most rows need neither a read nor a clear
+
+
+@pytest.mark.parametrize(("where", "kind"), [
+    ("_paint_listed", "default"), ("_paint_listed", "randomised"),
+    ("_store_level0", "randomised"),  # a scene with wear copies level 0 in
+    ("_finish_fill", "default"), ("_finish_fill", "randomised")])
+def test_a_scene_interrupted_in_a_fill_retires_to_all_zero_memory(
+        renderer: Renderer, monkeypatch, where: str, kind: str) -> None:
+    """A Ctrl-C raised as a fill kernel returns (level 0 painted or copied in, the mips
+    not yet made, or all done): the scene, retired, still hands over all-zero memory (the
+    rows painted are marked before the next kernel runs)."""
+    import tfalda_sim.rendering.scene as scene_module
+    import tfalda_sim.tracks.raster as raster_module
+
+    track = replace(generated(15), name=f"interrupted {where} {kind}")
+    fx, scene_seed = _effects(kind, 15)
+    lazy = build_scene(track, fx, np.random.default_rng(scene_seed))
+    renderer.render_windows(lazy, _poses(track, 1, 1)[0], ROIS)  # some tiles filled first
+    module = raster_module if where == "_paint_listed" else scene_module
+    real = getattr(module, where)
+
+    def interrupted(*args: Any) -> Any:
+        real(*args)  # the kernel's work done, then the Ctrl-C
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(module, where, interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        renderer.render_windows(lazy, _poses(track, 1, 2)[0], ROIS)
+    monkeypatch.setattr(module, where, real)
+    memory = memory_of(lazy.atlas)
+    assert memory is not None and np.frombuffer(memory, np.uint8).any()
+    build_scene(generated(16), Effects(), reuse=lazy)
+    assert lazy.tiles.retired
+    assert not np.frombuffer(memory, np.uint8).any()
+
+
+def test_a_scene_pickled_before_the_row_masks_renders_the_eager_frames(
+        renderer: Renderer) -> None:
+    """A lazy scene pickled before the row masks existed loads with every row of every
+    tile marked (nothing skipped: the old behaviour) and goes on rendering the eager
+    frames."""
+    import pickle
+
+    track = replace(generated(17), name="pickled before the row masks")
+    lazy = build_scene(track, Effects.off())
+    eager = build_scene(track, Effects.off(), lazy=False)
+    poses = _poses(track, 5, 17)
+    renderer.render_windows(lazy, poses[0], ROIS)
+    twin = pickle.loads(pickle.dumps(lazy))
+    for obj, cls in ((twin.tiles, MipTiles), (twin.tiles.marking, TiledMarkingMap)):
+        state = obj.__dict__.copy()
+        del state["nonzero_rows"]
+        obj.__dict__.clear()
+        cls.__setstate__(obj, state)
+        assert (obj.nonzero_rows == -1).all()
+    for k, pose in enumerate(poses[1:]):
+        for got, want in zip(renderer.render_windows(twin, pose, ROIS, frame_seed=k),
+                             renderer.render_windows(eager, pose, ROIS, frame_seed=k),
+                             strict=True):
+            np.testing.assert_array_equal(got, want)
