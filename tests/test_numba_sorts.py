@@ -7,8 +7,10 @@ process that loads both links every call to whichever came first. It happened: o
 the scene kernels (``scene._propagate``'s in-place sort) were recompiled, the Hough
 baseline's cached ``_lines`` (an argsort) returned indices from uninitialised memory,
 different segments on every call. The rule that keeps every name to one piece of code:
-in a kernel, an argsort is a merge sort (``kind="mergesort"``) and every other sort is
-a quicksort (no ``kind``)."""
+in a kernel, an argsort is a merge sort (``kind="mergesort"``), every other sort is a
+quicksort (no ``kind``), and no sort or search takes the options that make other
+variants of the same helpers (a list's ``reverse=``/``key=``, ``sorted()``,
+``searchsorted``'s ``side=``)."""
 
 from __future__ import annotations
 
@@ -40,16 +42,24 @@ def _kernels() -> list[tuple[str, ast.FunctionDef]]:
     return out
 
 
-def _sort_calls(fn: ast.FunctionDef) -> list[tuple[str, str | None, int]]:
-    """``(kind of call, its kind= argument, line)`` of every sort in ``fn``."""
+def _sort_calls(fn: ast.FunctionDef) -> list[tuple[str, str | None, int, int]]:
+    """``(kind of call, its kind= argument, its number of other arguments, line)`` of every
+    sort or search that numba builds from helpers in ``fn``."""
     calls = []
     for node in ast.walk(fn):
-        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
+        if not isinstance(node, ast.Call):
+            continue
+        if isinstance(node.func, ast.Attribute):
             name = node.func.attr
-            if name in ("argsort", "sort", "unique"):
-                kind = next((kw.value.value for kw in node.keywords if kw.arg == "kind"
-                             and isinstance(kw.value, ast.Constant)), None)
-                calls.append((name, kind, node.lineno))
+        elif isinstance(node.func, ast.Name):
+            name = node.func.id
+        else:
+            continue
+        if name in ("argsort", "sort", "unique", "sorted", "searchsorted"):
+            kind = next((kw.value.value for kw in node.keywords if kw.arg == "kind"
+                         and isinstance(kw.value, ast.Constant)), None)
+            others = len([kw for kw in node.keywords if kw.arg != "kind"])
+            calls.append((name, kind, others, node.lineno))
     return calls
 
 
@@ -63,7 +73,13 @@ def test_kernels_are_found() -> None:
 @pytest.mark.parametrize(("name", "fn"), _kernels(), ids=lambda v: v if isinstance(v, str)
                          else "")
 def test_sorts_in_kernels_follow_the_rule(name: str, fn: ast.FunctionDef) -> None:
-    for call, kind, line in _sort_calls(fn):
+    for call, kind, others, line in _sort_calls(fn):
+        # Variants that numba builds from the same helpers under the same names: a list's
+        # sort with reverse= or key=, sorted(), a searchsorted with another side=.
+        assert call != "sorted" and others == 0, (
+            f"{name} line {line}: {call} with {others} keyword argument(s) in a cached "
+            "kernel: its helpers could share names with another variant's (see this "
+            "module's docstring); sort an array with its plain sort instead")
         if call == "argsort":
             assert kind == "mergesort", (
                 f"{name} line {line}: an argsort in a cached kernel must be "

@@ -799,13 +799,15 @@ class TiledMarkingMap:
 
     def detach(self) -> None:
         """Start again on fresh memory, nothing painted: the memory painted so far (an
-        atlas's level 0) was handed over to another scene."""
-        self.intensity = untouched_zeros(self.shape)
-        if self.labels is not None:
-            self.labels = untouched_zeros(self.shape)
+        atlas's level 0) was handed over to another scene. Nothing counts as painted
+        before the memory changes: a Ctrl-C in between leaves a map that repaints into
+        its old memory (the same values), never one that counts fresh zeros as paint."""
         self.filled[:] = 0
         self.nonzero_rows[:] = 0
         self._n_record[0] = 0
+        self.intensity = untouched_zeros(self.shape)
+        if self.labels is not None:
+            self.labels = untouched_zeros(self.shape)
 
     def fill(self, tiles: np.ndarray) -> None:
         """Paint the tiles marked in ``tiles`` (a mask shaped like ``filled``) that are not

@@ -480,20 +480,23 @@ class MipTiles:
         memory = memory_of(self.atlas)
         if memory is None:
             return None
-        args = (self.sizes, self.tile, self.grids, self.offsets, self._level0_rows(),
-                self.nonzero_rows)
         # Lists, not scans of ``filled`` (~10⁵ tiles): each fill's tiles; level 0 also
         # holds what a map painting into it painted for other scenes. One call: a kernel
         # call from Python costs µs, and a scene has had ~30 fills.
         runs = self._written_runs
+        rows0 = self._level0_rows()
         if self.level0_in_atlas:
+            # The map leaves this memory before it is cleared (its list and row marks
+            # taken first): a Ctrl-C past this point leaves no map that counts as painted
+            # what is cleared below, for a scene sharing it or the next on this track.
             runs = [*runs, self.marking.painted_tiles()]
-        if runs:
-            _zero_tiles(self.atlas, self.origins, np.concatenate(runs), *args)
-        if self.level0_in_atlas:
-            self.marking.detach()
+            rows0 = rows0.copy()
             if _last_marking and _last_marking[0] is self.marking:
                 _last_marking.clear()
+            self.marking.detach()
+        if runs:
+            _zero_tiles(self.atlas, self.origins, np.concatenate(runs), self.sizes,
+                        self.tile, self.grids, self.offsets, rows0, self.nonzero_rows)
         (wx, wy), width = self.wall_origin, self.wall.shape[1] + 1  # + the wrap column
         for r in np.flatnonzero(self.wall_filled):
             self.atlas[wy + r, wx:wx + width] = 0

@@ -603,3 +603,40 @@ def test_a_scene_pickled_before_the_row_masks_renders_the_eager_frames(
                              renderer.render_windows(eager, pose, ROIS, frame_seed=k),
                              strict=True):
             np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("where", ["_zero_tiles", "untouched_zeros"])
+def test_a_ctrl_c_while_a_scene_retires_leaves_its_marking_map_right(
+        renderer: Renderer, monkeypatch, where: str) -> None:
+    """A Ctrl-C as the retiring scene's clear returns, or inside its marking map's
+    ``detach`` (as the fresh memory is made): the next scene on that track (which shares
+    the map) still renders the eager frames. Before, the map could count as painted the
+    tiles just cleared."""
+    import tfalda_sim.rendering.scene as scene_module
+    import tfalda_sim.tracks.raster as raster_module
+
+    track = replace(generated(18), name=f"retire interrupted at {where}")
+    pose = _poses(track, 1, 18)[0]
+    a = build_scene(track, Effects())
+    renderer.render_windows(a, pose, ROIS)
+    assert a.tiles.level0_in_atlas and a.tiles.marking.filled.any()
+    module = scene_module if where == "_zero_tiles" else raster_module
+    real = getattr(module, where)
+    calls = []
+
+    def interrupted(*args: Any) -> Any:
+        real(*args)  # done, then the Ctrl-C
+        calls.append(1)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(module, where, interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        build_scene(generated(19), Effects(), reuse=a)
+    monkeypatch.setattr(module, where, real)
+    assert calls and a.tiles.retired
+    fx = replace(Effects(), wear=0.3)
+    b = build_scene(track, fx, np.random.default_rng(1))
+    eager = build_scene(track, fx, np.random.default_rng(1), lazy=False)
+    for got, want in zip(renderer.render_windows(b, pose, ROIS, frame_seed=1),
+                         renderer.render_windows(eager, pose, ROIS, frame_seed=1), strict=True):
+        np.testing.assert_array_equal(got, want)
