@@ -57,6 +57,86 @@ def pose_at(x0: float, y0: float, h0: float, kappa: float, u: float) -> tuple[fl
     )
 
 
+CHAIN_OK, CHAIN_NOT_FINITE, CHAIN_WRAP = 0, 1, 2
+"""``chain_angles``' answers: done, a non-finite arc length, an arc length of a closed
+track outside ``[0, total)`` (the caller wraps it with ``np.mod`` and asks again)."""
+
+
+@njit(cache=True)
+def chain_angles(s: np.ndarray, s0: np.ndarray, h0: np.ndarray, kappa: np.ndarray,
+                 total: float, closed: bool, idx: np.ndarray, u: np.ndarray,
+                 heading: np.ndarray, slot: np.ndarray, angles: np.ndarray
+                 ) -> tuple[int, int]:
+    """First half of a vectorised pose query along the chain: for each arc length ``s``
+    [m], its segment ``idx`` (``searchsorted(s0, s, "right") − 1``, clamped), the local
+    coordinate ``u`` [m] and the heading ``h0[idx] + kappa[idx]·u`` [rad]. The pose needs
+    the sine and cosine of both headings, numpy's (its vectorised ones differ from libm's
+    by ulps): a segment's start heading has them once per track, and so has the heading
+    of a straight (the same number); the others are listed in ``angles[:m]``, query ``i``
+    at ``slot[i]`` (−1 for none). Returns ``(CHAIN_OK, m)``, or ``CHAIN_NOT_FINITE`` /
+    ``CHAIN_WRAP`` before writing anything."""
+    n = len(s)
+    for i in range(n):
+        v = s[i]
+        if not math.isfinite(v):
+            return CHAIN_NOT_FINITE, 0
+        if closed and not 0.0 <= v < total:
+            return CHAIN_WRAP, 0  # np.mod is the identity inside [0, total)
+    last = len(s0) - 1
+    m = 0
+    for i in range(n):
+        v = s[i]
+        lo = 0
+        hi = len(s0)
+        while lo < hi:  # the number of s0 ≤ v
+            mid = (lo + hi) >> 1
+            if s0[mid] <= v:
+                lo = mid + 1
+            else:
+                hi = mid
+        j = min(max(lo - 1, 0), last)
+        idx[i] = j
+        uu = v - s0[j]
+        u[i] = uu
+        h = h0[j] + kappa[j] * uu
+        heading[i] = h
+        # h0 + 0·u is h0, but for a start heading of −0.0 (+0.0 then): sign included.
+        if h == h0[j] and math.copysign(1.0, h) == math.copysign(1.0, h0[j]):
+            slot[i] = -1
+        else:
+            slot[i] = m
+            angles[m] = h
+            m += 1
+    return CHAIN_OK, m
+
+
+@njit(cache=True)
+def chain_points(idx: np.ndarray, u: np.ndarray, slot: np.ndarray, sin_h0: np.ndarray,
+                 cos_h0: np.ndarray, sines: np.ndarray, cosines: np.ndarray,
+                 x0: np.ndarray, y0: np.ndarray, kappa: np.ndarray, lateral: np.ndarray,
+                 x: np.ndarray, y: np.ndarray) -> None:
+    """Second half of the pose query (after ``chain_angles`` and numpy's sine and cosine
+    of its listed angles; ``sin_h0``, ``cos_h0``: numpy's of each segment's start
+    heading): the points at ``lateral`` [m] (one per query, or one for all), the same
+    expressions in the same order as ``pose_at``'s."""
+    one = len(lateral) == 1
+    for i in range(len(idx)):
+        j = idx[i]
+        k = kappa[j]
+        q = slot[i]
+        sin_h = sin_h0[j] if q < 0 else sines[q]
+        cos_h = cos_h0[j] if q < 0 else cosines[q]
+        if k == 0.0:
+            xc = x0[j] + u[i] * cos_h0[j]
+            yc = y0[j] + u[i] * sin_h0[j]
+        else:
+            xc = x0[j] + (sin_h - sin_h0[j]) / k
+            yc = y0[j] - (cos_h - cos_h0[j]) / k
+        lat = lateral[0] if one else lateral[i]
+        x[i] = xc - lat * sin_h
+        y[i] = yc + lat * cos_h
+
+
 @njit(cache=True)
 def project(
     x0: float,

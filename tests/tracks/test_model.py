@@ -272,3 +272,78 @@ def test_obstacle_corners_are_each_obstacles_own_pose_read_only(seed: int) -> No
         mine[:] = 0.0
         assert np.array_equal(track.obstacle_corners_m[k], own)
     assert sum(len(generated(s).obstacles) for s in range(0, 40, 3)) > 0
+
+
+def _numpy_pose(track: Track, s: np.ndarray | float, lateral_m: np.ndarray | float = 0.0
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pose query as plain numpy expressions (``Track.pose`` before its kernels)."""
+    t = track.table
+    s = np.asarray(s, dtype=np.float64)
+    if track.closed:
+        s = np.mod(s, track.length_m)
+    idx = np.minimum(np.maximum(np.searchsorted(t.s0, s, side="right") - 1, 0), len(t.s0) - 1)
+    u = s - t.s0[idx]
+    h0, k = t.h0[idx], t.kappa[idx]
+    h = h0 + k * u
+    straight = k == 0.0
+    safe_k = np.where(straight, 1.0, k)
+    sin_h0, cos_h0, sin_h, cos_h = np.sin(h0), np.cos(h0), np.sin(h), np.cos(h)
+    x = np.where(straight, t.x0[idx] + u * cos_h0, t.x0[idx] + (sin_h - sin_h0) / safe_k)
+    y = np.where(straight, t.y0[idx] + u * sin_h0, t.y0[idx] - (cos_h - cos_h0) / safe_k)
+    lat = np.asarray(lateral_m, dtype=np.float64)
+    return x - lat * sin_h, y + lat * cos_h, h
+
+
+def _same_bits(a: object, b: object) -> bool:
+    a, b = np.asarray(a), np.asarray(b)
+    return a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
+@pytest.mark.parametrize("name", ["seed-3", "seed-11", "oval", "open"])
+def test_pose_gives_the_bits_of_the_numpy_expressions(name: str) -> None:
+    """``Track.pose`` (two kernels around numpy's sine and cosine) gives bit for bit what
+    the numpy expressions give: every arc length, wrapped or not, scalars, vectors and
+    2-d arrays, with a lateral offset per query or one for all, and a straight whose
+    start heading is −0.0 (whose heading h0 + 0·u is +0.0)."""
+    if name == "open":
+        track = Track((Straight(1.0), Arc(2.0, 1.0), Straight(0.5)), closed=False,
+                      start=Pose(0.3, -0.2, -0.0))
+    elif name == "oval":
+        track = load_named("oval")
+    else:
+        track = generate(int(name.split("-")[1]))
+    total = track.length_m
+    rng = np.random.default_rng(0)
+    ends = np.concatenate((track.table.s0, track.table.s0 + track.table.length))
+    if track.closed:
+        queries: list[tuple[object, object]] = [
+            (rng.uniform(-2 * total, 3 * total, 500), rng.uniform(-0.6, 0.6, 500)),
+            (np.array([0.0, -0.0, total, -total, 2 * total, np.nextafter(total, 0.0)]), 0.1),
+        ]
+    else:
+        queries = [(rng.uniform(0.0, total, 500), rng.uniform(-0.6, 0.6, 500))]
+    queries += [
+        (np.linspace(0.0, total, 531)[:-1], 0.0),
+        (float(rng.uniform(0.0, total)), -0.2),
+        (rng.uniform(0.0, total, (3, 4)), rng.uniform(-0.5, 0.5, (3, 4))),
+        (np.clip(ends, 0.0, total), -0.1),
+        (0.0, 0.0),
+    ]
+    for s, lateral in queries:
+        got, want = track.pose(s, lateral), _numpy_pose(track, s, lateral)
+        for g, w in zip(got, want, strict=True):
+            assert _same_bits(g, w)
+            assert np.ndim(g) > 0 or isinstance(g, np.float64)
+
+
+def test_pose_rejects_what_it_cannot_place() -> None:
+    closed = generate(3)
+    with pytest.raises(ValueError, match="must be finite"):
+        closed.pose(np.array([1.0, np.nan]))
+    with pytest.raises(ValueError, match="must be finite"):
+        closed.pose(np.inf)
+    open_track = Track((Straight(1.0), Arc(2.0, 1.0)), closed=False)
+    with pytest.raises(ValueError, match="outside the open track"):
+        open_track.pose(np.array([0.5, 3.5]))
+    with pytest.raises(ValueError, match="outside the open track"):
+        open_track.pose(-0.1)
