@@ -383,8 +383,11 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         speed = opts.speed_m_s
         effects, scene_seed, self._noise_seed, fault_seed = self._draw_episode(rng, randomize)
 
-        if self._world is None or self._track != track:
+        if self._world is None:
             self._world = World(track, self.car, frame_rate_hz=self.camera.frame_rate_hz)
+            self._map = None
+        elif self._track != track:
+            self._world.set_track(track)  # the same car in its space: cheaper than a new one
             self._map = None
         self._track = track
         self._faults = FaultInjector(faults, np.random.default_rng(fault_seed))
@@ -516,6 +519,8 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             lateral = centre + float(rng.uniform(-START_NOISE_LATERAL_M, START_NOISE_LATERAL_M))
             heading = float(rng.uniform(-START_NOISE_HEADING_RAD, START_NOISE_HEADING_RAD))
             x, y, h = (float(v) for v in track.pose(s_m, lateral))
+            if not world.obstacle_shapes:  # nothing to run into: no trial placement
+                return x, y, h + heading
             world.reset((x, y, h + heading))
             if not world.collided:
                 return x, y, h + heading

@@ -20,6 +20,7 @@ import numpy as np
 from .dimensions import LANE_WIDTH_M, LINE_WIDTH_M
 from .geometry import (
     CHAIN_NOT_FINITE,
+    CHAIN_OK,
     CHAIN_WRAP,
     Pose,
     SegmentTable,
@@ -332,11 +333,15 @@ class Track:
         answer, m = chain_angles(flat, t.s0, t.h0, t.kappa, self.length_m, self.closed, idx,
                                  u, heading, slot, angles)
         if answer == CHAIN_WRAP:
+            # np.mod may round up to the length itself (s = −1e−20): the search clamps it
+            # to the last segment, so no second wrap check (closed=False).
             flat = np.mod(flat, self.length_m)
-            answer, m = chain_angles(flat, t.s0, t.h0, t.kappa, self.length_m, self.closed,
-                                     idx, u, heading, slot, angles)
+            answer, m = chain_angles(flat, t.s0, t.h0, t.kappa, self.length_m, False, idx, u,
+                                     heading, slot, angles)
         if answer == CHAIN_NOT_FINITE:
             raise ValueError("arc length s must be finite")
+        if answer != CHAIN_OK:  # the kernels below would read unwritten indices
+            raise RuntimeError(f"chain_angles answered {answer}")
         if not self.closed:
             self._check_open_range(flat)
         sin_h0, cos_h0 = self._start_trig

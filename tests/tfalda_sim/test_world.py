@@ -123,3 +123,42 @@ def test_the_world_pickles_and_continues_identically() -> None:
         world.step(-0.2)
         copy.step(-0.2)
     assert world.pose == copy.pose and world.speed_m_s == copy.speed_m_s
+
+
+def _drive(world: World, track, steps: int = 60) -> list[tuple]:
+    """A reset at a lane start, then a weave with throttle: poses, positions, hits."""
+    world.reset(lane_start(track, 2.0), speed_m_s=1.5, steer_rad=0.05)
+    out = []
+    for k in range(steps):
+        hit = world.step(0.3 * math.sin(0.2 * k), throttle=0.4 * math.cos(0.1 * k))
+        out.append((world.pose, world.speed_m_s, world.steer_rad, hit, world.collided,
+                    world.position(), world.time_s))
+    return out
+
+
+def test_a_world_moved_to_another_track_drives_as_a_new_one() -> None:
+    """``set_track`` (the env's reset onto a new track) gives, bit for bit, what a new
+    world on that track gives: the old track's cartons are gone (no collision with them),
+    the new ones collide, and the hint of the old track does not leak."""
+    with_cartons = generated(3)
+    ob = with_cartons.obstacles[0]
+    lateral = (-1.0 if ob.lane.value == "right" else 1.0) * 0.5 * with_cartons.lane_width_m
+    oval = load_named("oval")
+    moved = World(with_cartons)
+    _drive(moved, with_cartons)
+    for track in (oval, with_cartons, generated(5), with_cartons):
+        moved.set_track(track)
+        assert moved.track is track and not moved.collided and moved.time_s == 0.0
+        assert _drive(moved, track) == _drive(World(track), track)
+    # On another track, with cartons elsewhere, a car where the carton of track 3 stood
+    # touches nothing (as on the oval, without cartons).
+    where = lane_start(with_cartons, ob.s_m, lateral)
+    for track in (generated(5), oval):
+        moved.set_track(track)
+        moved.reset(where)
+        fresh = World(track)
+        fresh.reset(where)
+        assert not fresh.collided and not moved.collided and not moved.step(0.0)
+    moved.set_track(with_cartons)
+    moved.reset(lane_start(with_cartons, ob.s_m, lateral))
+    assert moved.collided

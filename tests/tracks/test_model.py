@@ -318,7 +318,9 @@ def test_pose_gives_the_bits_of_the_numpy_expressions(name: str) -> None:
     if track.closed:
         queries: list[tuple[object, object]] = [
             (rng.uniform(-2 * total, 3 * total, 500), rng.uniform(-0.6, 0.6, 500)),
-            (np.array([0.0, -0.0, total, -total, 2 * total, np.nextafter(total, 0.0)]), 0.1),
+            (np.array([0.0, -0.0, total, -total, 2 * total, np.nextafter(total, 0.0),
+                       -1e-20, -5e-324, 1e300, -1e300]), 0.1),
+            (-1e-20, 0.0),  # np.mod gives the length itself
         ]
     else:
         queries = [(rng.uniform(0.0, total, 500), rng.uniform(-0.6, 0.6, 500))]
