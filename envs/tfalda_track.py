@@ -336,6 +336,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         self._world: World | None = None
         self._track: Track | None = None
         self._last: _Frame | None = None
+        self._detector: TfaldaDetector | None = None
         self._prepared: tuple[int, Track] | None = None  # prepare_reset's (seed, track)
         self._prepared_for: dict | None = None  # … for this state of np_random
         self._prepared_scene: tuple[tuple, Scene] | None = None  # … its (key, scene)
@@ -403,7 +404,11 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
                 # new one.
                 self._scene = self._build_scene(*key, reuse=self._scene)
             self._scene_key = key
-        self._detector = TfaldaDetector(self.detector_config)
+        detector = getattr(self, "_detector", None)  # None: unpickled from before it
+        if detector is not None and detector.config is self.detector_config:
+            detector.restart()  # as a new one (tested), without building one
+        else:
+            self._detector = TfaldaDetector(self.detector_config)
 
         start = opts.start
         pose = self._start_pose(track, start, rng)

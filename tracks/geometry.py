@@ -64,24 +64,30 @@ track outside ``[0, total)`` (the caller wraps it with ``np.mod`` and asks again
 
 @njit(cache=True)
 def chain_angles(s: np.ndarray, s0: np.ndarray, h0: np.ndarray, kappa: np.ndarray,
-                 total: float, closed: bool, idx: np.ndarray, u: np.ndarray,
-                 heading: np.ndarray, slot: np.ndarray, angles: np.ndarray
-                 ) -> tuple[int, int]:
+                 total: float, closed: bool
+                 ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """First half of a vectorised pose query along the chain: for each arc length ``s``
     [m], its segment ``idx`` (``searchsorted(s0, s, "right") − 1``, clamped), the local
     coordinate ``u`` [m] and the heading ``h0[idx] + kappa[idx]·u`` [rad]. The pose needs
     the sine and cosine of both headings, numpy's (its vectorised ones differ from libm's
     by ulps): a segment's start heading has them once per track, and so has the heading
-    of a straight (the same number); the others are listed in ``angles[:m]``, query ``i``
-    at ``slot[i]`` (−1 for none). Returns ``(CHAIN_OK, m)``, or ``CHAIN_NOT_FINITE`` /
-    ``CHAIN_WRAP`` before writing anything."""
+    of a straight (the same number); the others are listed in ``angles``, query ``i`` at
+    ``slot[i]`` (−1 for none). Returns ``(CHAIN_OK, idx, u, heading, slot, angles)``, or
+    ``CHAIN_NOT_FINITE`` / ``CHAIN_WRAP`` and empty arrays. (Allocated here: each numpy
+    call costs µs in a process whose caches the renderer keeps busy.)"""
     n = len(s)
     for i in range(n):
         v = s[i]
-        if not math.isfinite(v):
-            return CHAIN_NOT_FINITE, 0
-        if closed and not 0.0 <= v < total:
-            return CHAIN_WRAP, 0  # np.mod is the identity inside [0, total)
+        if not math.isfinite(v) or (closed and not 0.0 <= v < total):
+            # np.mod is the identity inside [0, total): only others need wrapping
+            code = CHAIN_NOT_FINITE if not math.isfinite(v) else CHAIN_WRAP
+            none = np.empty(0)
+            return code, np.empty(0, np.int64), none, none, np.empty(0, np.int64), none
+    idx = np.empty(n, np.int64)
+    u = np.empty(n)
+    heading = np.empty(n)
+    slot = np.empty(n, np.int64)
+    angles = np.empty(n)
     last = len(s0) - 1
     m = 0
     for i in range(n):
@@ -107,20 +113,23 @@ def chain_angles(s: np.ndarray, s0: np.ndarray, h0: np.ndarray, kappa: np.ndarra
             slot[i] = m
             angles[m] = h
             m += 1
-    return CHAIN_OK, m
+    return CHAIN_OK, idx, u, heading, slot, angles[:m]
 
 
 @njit(cache=True)
 def chain_points(idx: np.ndarray, u: np.ndarray, slot: np.ndarray, sin_h0: np.ndarray,
                  cos_h0: np.ndarray, sines: np.ndarray, cosines: np.ndarray,
-                 x0: np.ndarray, y0: np.ndarray, kappa: np.ndarray, lateral: np.ndarray,
-                 x: np.ndarray, y: np.ndarray) -> None:
+                 x0: np.ndarray, y0: np.ndarray, kappa: np.ndarray, lateral: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """Second half of the pose query (after ``chain_angles`` and numpy's sine and cosine
     of its listed angles; ``sin_h0``, ``cos_h0``: numpy's of each segment's start
-    heading): the points at ``lateral`` [m] (one per query, or one for all), the same
-    expressions in the same order as ``pose_at``'s."""
+    heading): the points ``(x, y)`` [m] at ``lateral`` [m] (one per query, or one for
+    all), the same expressions in the same order as ``pose_at``'s."""
+    n = len(idx)
+    x = np.empty(n)
+    y = np.empty(n)
     one = len(lateral) == 1
-    for i in range(len(idx)):
+    for i in range(n):
         j = idx[i]
         k = kappa[j]
         q = slot[i]
@@ -135,6 +144,7 @@ def chain_points(idx: np.ndarray, u: np.ndarray, slot: np.ndarray, sin_h0: np.nd
         lat = lateral[0] if one else lateral[i]
         x[i] = xc - lat * sin_h
         y[i] = yc + lat * cos_h
+    return x, y
 
 
 @njit(cache=True)

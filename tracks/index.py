@@ -85,22 +85,35 @@ def _cell_items(xs: np.ndarray, ys: np.ndarray, segs: np.ndarray, gx0: float, gy
     pair_seg = np.empty(len(xs) * side * side, np.int64)
     n = 0
     r2 = reach * reach
+    # A cell's squared distance is dx² + dy², its column's dx² plus its row's dy²: each
+    # square computed once per column and row of the neighbourhood (2·side, not side²),
+    # the same roundings as the sum of the two products.
+    dy2 = np.empty(side)
+    row_ok = np.empty(side, np.bool_)
     for k in range(len(xs)):
         sx = xs[k]
         sy = ys[k]
         seg = segs[k]
         ci = np.int64(math.floor((sx - gx0) / cell_m))
         cj = np.int64(math.floor((sy - gy0) / cell_m))
+        for oj in range(-span, span + 1):
+            jj = cj + oj
+            cy_lo = gy0 + jj * cell_m
+            dy = max(0.0, max(cy_lo - sy, sy - cy_lo - cell_m))
+            dy2[oj + span] = dy * dy
+            row_ok[oj + span] = 0 <= jj < ny
         for oi in range(-span, span + 1):
             ii = ci + oi
+            if not 0 <= ii < nx:
+                continue
             cx_lo = gx0 + ii * cell_m
             dx = max(0.0, max(cx_lo - sx, sx - cx_lo - cell_m))
-            for oj in range(-span, span + 1):
-                jj = cj + oj
-                cy_lo = gy0 + jj * cell_m
-                dy = max(0.0, max(cy_lo - sy, sy - cy_lo - cell_m))
-                if dx * dx + dy * dy <= r2 and 0 <= ii < nx and 0 <= jj < ny:
-                    c = jj * nx + ii
+            dx2 = dx * dx
+            if dx2 > r2:  # dy² ≥ 0 only adds: no cell of this column
+                continue
+            for q in range(side):
+                if dx2 + dy2[q] <= r2 and row_ok[q]:
+                    c = (cj + q - span) * nx + ii
                     if last[c] == seg:
                         continue
                     last[c] = seg

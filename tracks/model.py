@@ -323,41 +323,34 @@ class Track:
             s = np.broadcast_to(s, shape)
         flat = s.reshape(-1)
         lat_flat = lat.reshape(-1) if lat.size == 1 else np.broadcast_to(lat, shape).reshape(-1)
-        t = self.table
-        n = flat.shape[0]
-        idx = np.empty(n, np.int64)
-        u = np.empty(n)
-        heading = np.empty(n)
-        slot = np.empty(n, np.int64)
-        angles = np.empty(n)
-        answer, m = chain_angles(flat, t.s0, t.h0, t.kappa, self.length_m, self.closed, idx,
-                                 u, heading, slot, angles)
+        s0, h0, kappa, total, closed, sin_h0, cos_h0, x0, y0 = self._pose_args
+        answer, idx, u, heading, slot, angles = chain_angles(flat, s0, h0, kappa, total,
+                                                             closed)
         if answer == CHAIN_WRAP:
             # np.mod may round up to the length itself (s = −1e−20): the search clamps it
             # to the last segment, so no second wrap check (closed=False).
-            flat = np.mod(flat, self.length_m)
-            answer, m = chain_angles(flat, t.s0, t.h0, t.kappa, self.length_m, False, idx, u,
-                                     heading, slot, angles)
+            flat = np.mod(flat, total)
+            answer, idx, u, heading, slot, angles = chain_angles(flat, s0, h0, kappa, total,
+                                                                 False)
         if answer == CHAIN_NOT_FINITE:
             raise ValueError("arc length s must be finite")
-        if answer != CHAIN_OK:  # the kernels below would read unwritten indices
+        if answer != CHAIN_OK:  # the kernel below would read unwritten indices
             raise RuntimeError(f"chain_angles answered {answer}")
-        if not self.closed:
+        if not closed:
             self._check_open_range(flat)
-        sin_h0, cos_h0 = self._start_trig
-        x = np.empty(n)
-        y = np.empty(n)
-        chain_points(idx, u, slot, sin_h0, cos_h0, np.sin(angles[:m]), np.cos(angles[:m]),
-                     t.x0, t.y0, t.kappa, np.ascontiguousarray(lat_flat), x, y)
+        x, y = chain_points(idx, u, slot, sin_h0, cos_h0, np.sin(angles), np.cos(angles),
+                            x0, y0, kappa, np.ascontiguousarray(lat_flat))
         if not shape:
             return x[0], y[0], heading[0]
         return x.reshape(shape), y.reshape(shape), heading.reshape(shape)
 
     @cached_property
-    def _start_trig(self) -> tuple[np.ndarray, np.ndarray]:
-        """numpy's sine and cosine of each segment's start heading (``pose``)."""
-        h0 = self.table.h0
-        return np.sin(h0), np.cos(h0)
+    def _pose_args(self) -> tuple:
+        """``pose``'s kernel arguments, gathered once per road: its segment table, length,
+        whether it is closed, and numpy's sine and cosine of each start heading."""
+        t = self.table
+        return (t.s0, t.h0, t.kappa, self.length_m, self.closed, np.sin(t.h0), np.cos(t.h0),
+                t.x0, t.y0)
 
     def _check_open_range(self, s: np.ndarray) -> None:
         """An open track's arc lengths [m] must lie on it (±1 nm)."""

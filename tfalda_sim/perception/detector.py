@@ -116,6 +116,13 @@ class TfaldaDetector:
         self._state = state_of(self._forced) if self._forced else StraightState()
         self.lis.reset()
 
+    def restart(self) -> None:
+        """A new frame sequence: what a new detector of the same config would do next
+        (``reset``, the frame count from 0 and no imposed state), without building one."""
+        self._frames = 0
+        self._forced = None
+        self.reset()
+
     def force_state(self, kind: StateKind | None) -> None:
         """Impose a driving state from outside (section 2.3.2), e.g. a planned lane change;
         ``None`` hands the choice back to the detector."""

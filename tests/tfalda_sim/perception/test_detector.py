@@ -183,3 +183,40 @@ def test_lane_change_hands_the_lines_over(renderer: Renderer) -> None:
     on_left = lane_hit_rates(obs.lanes[[0, 2]], truth_distance(labels, (Marking.LEFT_LINE,)))
     assert on_centre[0] >= 0.9 and on_left[0] >= 0.9
     assert on_centre[1] >= 0.3 and on_left[1] >= 0.9
+
+
+def _observations_equal(a, b) -> bool:
+    fields = ("frame", "rois", "lanes", "d", "intensity", "lam", "replaced", "corrected",
+              "widths", "fault_count", "roi_reset", "state", "first_frame", "next_rois")
+    def same(x: object, y: object) -> bool:
+        x, y = np.asarray(x), np.asarray(y)
+        return np.array_equal(x, y, equal_nan=x.dtype.kind == "f")  # λ: NaN without a lane
+
+    return all(same(getattr(a, f), getattr(b, f)) for f in fields)
+
+
+@pytest.mark.parametrize("config", [DetectorConfig.thesis(), DetectorConfig.improved()])
+def test_a_restarted_detector_is_a_new_one(renderer: Renderer, config: DetectorConfig) -> None:
+    """``restart`` (the env's reset) gives what a new detector gives, frame for frame:
+    after frames that moved the ROIs, counted frames, a blackout that reset them, and an
+    imposed state."""
+    track = load_named("left-curve")
+    scene = build_scene(track, Effects(), np.random.default_rng(0))
+
+    def frames(start_m: float, n: int) -> list[np.ndarray]:
+        out = []
+        for k in range(n):
+            x, y, h = track.pose(start_m + 0.05 * k, -0.5 * track.lane_width_m)
+            out.append(renderer.render(scene, (float(x), float(y), float(h)), frame_seed=k))
+        return out
+
+    used = TfaldaDetector(config)
+    for frame in frames(0.3, 12) + [np.zeros_like(frames(1.0, 1)[0])] * 6 + frames(2.0, 3):
+        used.process(frame)
+    assert used.process(frames(2.2, 1)[0]).frame > 0
+    if config.lis.lane_change_state:
+        used.force_state(StateKind.LANE_CHANGE_LEFT)
+    used.restart()
+    fresh = TfaldaDetector(config)
+    for frame in frames(1.5, 10):
+        assert _observations_equal(used.process(frame), fresh.process(frame))
