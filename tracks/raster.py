@@ -759,6 +759,7 @@ class TiledMarkingMap:
         self.resolution_m = float(resolution_m)
         self.tile_px = tile_px
         # ``intensity``: paint into this zero array instead (a scene's atlas level 0).
+        self._shape = (n_rows, n_cols)
         self.intensity = untouched_zeros((n_rows, n_cols)) if intensity is None else intensity
         self.labels = untouched_zeros((n_rows, n_cols)) if labels else None
         self.filled = np.zeros((-(-n_rows // tile_px), -(-n_cols // tile_px)), np.uint8)
@@ -791,7 +792,20 @@ class TiledMarkingMap:
 
     @property
     def shape(self) -> tuple[int, int]:
-        return self.intensity.shape  # type: ignore[return-value]
+        return self._shape
+
+    @property
+    def intensity(self) -> np.ndarray:
+        """The painted intensity, ``shape``, uint8 (fresh zeros after ``detach``, mapped
+        only when asked for: a retired scene's map is rarely painted again, and a mapping
+        costs ~60 µs of a reset in the env)."""
+        if self._intensity is None:
+            self._intensity = untouched_zeros(self._shape)
+        return self._intensity
+
+    @intensity.setter
+    def intensity(self, value: np.ndarray) -> None:
+        self._intensity = value
 
     @property
     def complete(self) -> bool:
@@ -805,7 +819,7 @@ class TiledMarkingMap:
         self.filled[:] = 0
         self.nonzero_rows[:] = 0
         self._n_record[0] = 0
-        self.intensity = untouched_zeros(self.shape)
+        self._intensity = None  # fresh zeros when next asked for
         if self.labels is not None:
             self.labels = untouched_zeros(self.shape)
 
@@ -856,6 +870,9 @@ class TiledMarkingMap:
 
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__dict__.update(state)
+        if "intensity" in state:  # pickled before the lazy intensity
+            self._intensity = self.__dict__.pop("intensity")
+            self._shape = self._intensity.shape
         if "nonzero_rows" not in state:  # pickled before the row masks: every row may
             self.nonzero_rows = np.full(self.filled.size, -1, np.int64)  # hold paint
         if "_record" not in state:

@@ -351,40 +351,22 @@ def test_pose_rejects_what_it_cannot_place() -> None:
         open_track.pose(-0.1)
 
 
-def _reference_cells(track: Track) -> dict[int, list[int]]:
-    """The spatial index's cells by its definition, in plain Python: every segment of a
-    centre-line sample whose cell square lies within the reach of the sample."""
-    from tfalda_sim.tracks import index as ix
 
-    g = track.index
-    t = track.table
-    xs, ys, segs = ix._centre_samples(t.x0, t.y0, t.h0, t.kappa, t.length, ix._SAMPLE_STEP_M)
-    reach = track.half_road_m + ix.EXTRA_REACH_M + ix._SAMPLE_STEP_M
-    span = int(math.ceil(reach / g.cell_m)) + 1
-    cells: dict[int, list[int]] = {}
-    for sx, sy, seg in zip(xs.tolist(), ys.tolist(), segs.tolist(), strict=True):
-        ci = math.floor((sx - g.x0) / g.cell_m)
-        cj = math.floor((sy - g.y0) / g.cell_m)
-        for ii in range(ci - span, ci + span + 1):
-            cx_lo = g.x0 + ii * g.cell_m
-            dx = max(0.0, cx_lo - sx, sx - cx_lo - g.cell_m)
-            for jj in range(cj - span, cj + span + 1):
-                cy_lo = g.y0 + jj * g.cell_m
-                dy = max(0.0, cy_lo - sy, sy - cy_lo - g.cell_m)
-                if dx * dx + dy * dy <= reach * reach and 0 <= ii < g.nx and 0 <= jj < g.ny:
-                    listed = cells.setdefault(jj * g.nx + ii, [])
-                    if seg not in listed:
-                        listed.append(seg)
-    return cells
-
-
-@pytest.mark.parametrize("name", ["seed-0", "seed-7", "seed-21", "oval"])
-def test_spatial_index_lists_each_cells_segments_by_its_definition(name: str) -> None:
-    """The index kernel (squares per row and column of the neighbourhood) lists, cell by
-    cell, the segments of the plain definition, in increasing order."""
-    track = load_named("oval") if name == "oval" else generate(int(name.split("-")[1]))
-    g = track.index
-    want = _reference_cells(track)
-    for c in range(g.nx * g.ny):
-        got = g.items[g.cell_start[c]:g.cell_start[c + 1]].tolist()
-        assert got == sorted(want.get(c, []))
+@pytest.mark.parametrize("name", ["seed-3", "seed-40", "oval", "open"])
+def test_extreme_samples_are_those_of_linspace(name: str) -> None:
+    """The candidate samples of ``bounds`` are computed alone, as ``np.linspace`` computes
+    them among all (bit for bit, the open track's end included)."""
+    if name == "open":
+        track = Track((Straight(1.013), Arc(2.0, 1.0), Straight(0.517)), closed=False)
+    elif name == "oval":
+        track = load_named("oval")
+    else:
+        track = generate(int(name.split("-")[1]))
+    for step in (0.02, 0.05, 0.3):
+        n = max(2, math.ceil(track.length_m / step))
+        every = np.linspace(0.0, track.length_m, n + 1)
+        got = track._extreme_samples(step)
+        idx = np.rint(got / (track.length_m / n)).astype(np.int64)
+        assert _same_bits(got, every[idx])
+        if not track.closed:
+            assert got[-1] == track.length_m

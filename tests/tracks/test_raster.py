@@ -235,7 +235,8 @@ def test_paint_level0_skips_tiles_past_the_grid_and_old_pickles_keep_their_recor
     assert tiled.paint_level0(np.array([road[1], grid], np.int64)) == 0
     def pickled_before() -> dict:  # a state of its own each time (arrays not shared)
         state = pickle.loads(pickle.dumps(tiled)).__dict__
-        del state["_record"], state["_n_record"], state["nonzero_rows"]
+        del state["_record"], state["_n_record"], state["nonzero_rows"], state["_shape"]
+        state["intensity"] = state.pop("_intensity")  # before it was mapped on demand
         return state
 
     # The older list: a tile twice, and one recorded but never painted (a Ctrl-C).
@@ -251,6 +252,8 @@ def test_paint_level0_skips_tiles_past_the_grid_and_old_pickles_keep_their_recor
     # Before the row masks: every row of every tile may hold paint; a tile painted after
     # the load gets its own.
     assert (older.nonzero_rows == -1).all()
+    assert older.shape == tiled.shape
+    np.testing.assert_array_equal(older.intensity, tiled.intensity)
     assert old.nonzero_rows[road[0]] == -1 and old.nonzero_rows[road[3]] not in (0, -1)
     old.fill(np.ones(old.filled.shape, bool))  # each tile recorded once: inside the record
     assert sorted(old.painted_tiles().tolist()) == list(range(grid))
@@ -300,3 +303,25 @@ def test_tight_and_wide_arcs_are_painted_whole() -> None:
         solid = 2 * math.pi * ((radius + 0.4) + max(0.0, radius - 0.4)) * w
         dashed = 0.5 * 2 * math.pi * radius * w
         assert painted == pytest.approx(solid + dashed, rel=0.02), radius
+
+
+def test_a_detached_map_paints_fresh_zeros_mapped_when_asked() -> None:
+    """``detach`` drops the map's memory (another scene took it) and maps fresh zeros
+    only when the intensity is next asked for; the map then paints the same tiles as a
+    new map."""
+    from tfalda_sim.tracks.raster import TiledMarkingMap
+
+    track = load_named("oval")
+    tiled = TiledMarkingMap(track, labels=False)
+    tiles = np.arange(0, tiled.filled.size, 7, dtype=np.int64)
+    tiled.paint_level0(tiles)
+    old = tiled.intensity
+    tiled.detach()
+    assert tiled._intensity is None and tiled.shape == old.shape
+    assert not tiled.filled.any() and not tiled.painted_tiles().size
+    assert not tiled.intensity.any() and tiled.intensity is not old
+    tiled.paint_level0(tiles)
+    fresh = TiledMarkingMap(track, labels=False)
+    fresh.paint_level0(tiles)
+    np.testing.assert_array_equal(tiled.intensity, fresh.intensity)
+    np.testing.assert_array_equal(old, fresh.intensity)
