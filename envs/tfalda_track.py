@@ -384,11 +384,17 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         speed = opts.speed_m_s
         effects, scene_seed, self._noise_seed, fault_seed = self._draw_episode(rng, randomize)
 
-        if self._world is None:
+        world = self._world
+        if (world is None or world.car is not self.car
+                or world.frame_dt_s != 1.0 / self.camera.frame_rate_hz):
+            self._track = None  # set below, once the world is on the track
             self._world = World(track, self.car, frame_rate_hz=self.camera.frame_rate_hz)
             self._map = None
         elif self._track != track:
-            self._world.set_track(track)  # the same car in its space: cheaper than a new one
+            # The same car in its space: cheaper than a new one. A reset interrupted inside
+            # leaves no track current, so the next one puts the world on its track again.
+            self._track = None
+            world.set_track(track)
             self._map = None
         self._track = track
         self._faults = FaultInjector(faults, np.random.default_rng(fault_seed))

@@ -81,18 +81,27 @@ class World:
         next). The space, the car's body and shape stay: building them costs ~0.2 ms of a
         reset onto a new track (pymunk's allocations, in a process whose caches the
         renderer has just filled), and a kinematic car moves and collides the same in a
-        space that held other cartons before."""
-        if self.obstacle_shapes:
-            self.space.remove(*self.obstacle_shapes)
-        self.track = track
-        self.obstacle_shapes = []
-        for k in range(len(track.obstacles)):
+        space that held other cartons before.
+
+        Safe to call again after an interruption (a Ctrl-C) anywhere inside: the new
+        cartons are listed before they are added, and only shapes in the space are taken
+        out of it."""
+        shapes = []
+        for k in range(len(track.obstacles)):  # may raise: nothing changed yet
             shape = pymunk.Poly(self.space.static_body,
                                 [tuple(map(float, c)) for c in obstacle_corners(track, k)])
             shape.collision_type = _OBSTACLE
-            self.obstacle_shapes.append(shape)
-        if self.obstacle_shapes:
-            self.space.add(*self.obstacle_shapes)
+            shapes.append(shape)
+        for shape in self.obstacle_shapes:
+            if shape.space is not None:
+                self.space.remove(shape)
+            # The static body keeps its shapes (pymunk): without this, every carton of
+            # every earlier track would live as long as the world.
+            shape.body = None
+        self.obstacle_shapes = shapes  # listed first: a retry takes out what was added
+        if shapes:
+            self.space.add(*shapes)
+        self.track = track
         self.collided = False
         self.time_s = 0.0
         self._s_hint: float | None = None

@@ -78,8 +78,10 @@ def chain_angles(s: np.ndarray, s0: np.ndarray, h0: np.ndarray, kappa: np.ndarra
     n = len(s)
     for i in range(n):
         v = s[i]
-        if not math.isfinite(v) or (closed and not 0.0 <= v < total):
-            # np.mod is the identity inside [0, total): only others need wrapping
+        if not math.isfinite(v) or (closed and not (0.0 <= v < total
+                                                    and math.copysign(1.0, v) > 0.0)):
+            # np.mod is the identity inside [0, total), −0.0 aside (+0.0): only others
+            # need wrapping
             code = CHAIN_NOT_FINITE if not math.isfinite(v) else CHAIN_WRAP
             none = np.empty(0)
             return code, np.empty(0, np.int64), none, none, np.empty(0, np.int64), none
@@ -126,9 +128,11 @@ def chain_points(idx: np.ndarray, u: np.ndarray, slot: np.ndarray, sin_h0: np.nd
     heading): the points ``(x, y)`` [m] at ``lateral`` [m] (one per query, or one for
     all), the same expressions in the same order as ``pose_at``'s."""
     n = len(idx)
+    one = len(lateral) == 1
+    if not one and len(lateral) != n:
+        raise ValueError("chain_points: lateral needs one offset, or one per query")
     x = np.empty(n)
     y = np.empty(n)
-    one = len(lateral) == 1
     for i in range(n):
         j = idx[i]
         k = kappa[j]

@@ -231,6 +231,8 @@ class Track:
                             f"{', '.join(unknown)}; use dataclasses.replace")
         copy = object.__new__(type(self))
         copy.__dict__.update(self.__dict__)  # the fields, and the road's cached properties
+        if "obstacles" in changes:  # the one cached property of an element (not the road)
+            copy.__dict__.pop("obstacle_corners_m", None)
         for name, value in changes.items():
             if name in ("gaps", "obstacles", "intersections"):
                 value = tuple(value)  # type: ignore[arg-type]  # as __post_init__ does
@@ -318,11 +320,13 @@ class Track:
         s = np.asarray(s, dtype=np.float64)
         lat = np.asarray(lateral_m, dtype=np.float64)
         shape = s.shape
-        if lat.shape != shape:
-            shape = np.broadcast_shapes(shape, lat.shape)
-            s = np.broadcast_to(s, shape)
+        if lat.shape != shape and lat.size != 1:
+            # Offsets of another shape: x and y broadcast, the heading keeps s's shape.
+            x, y, _ = self.pose(np.broadcast_to(s, np.broadcast_shapes(shape, lat.shape)),
+                                np.broadcast_to(lat, np.broadcast_shapes(shape, lat.shape)))
+            return x, y, self.pose(s)[2]
         flat = s.reshape(-1)
-        lat_flat = lat.reshape(-1) if lat.size == 1 else np.broadcast_to(lat, shape).reshape(-1)
+        lat_flat = lat.reshape(-1)
         s0, h0, kappa, total, closed, sin_h0, cos_h0, x0, y0 = self._pose_args
         answer, idx, u, heading, slot, angles = chain_angles(flat, s0, h0, kappa, total,
                                                              closed)
@@ -340,6 +344,9 @@ class Track:
             self._check_open_range(flat)
         x, y = chain_points(idx, u, slot, sin_h0, cos_h0, np.sin(angles), np.cos(angles),
                             x0, y0, kappa, np.ascontiguousarray(lat_flat))
+        if lat.ndim > len(shape):  # one offset, as an array of more dimensions than s
+            out = np.broadcast_shapes(shape, lat.shape)
+            return x.reshape(out), y.reshape(out), heading.reshape(shape)[()]
         if not shape:
             return x[0], y[0], heading[0]
         return x.reshape(shape), y.reshape(shape), heading.reshape(shape)

@@ -367,3 +367,68 @@ def test_prepare_reset_prepares_the_next_episode_and_changes_nothing(
     fixed = gym.make("TfaldaTrack-v0", track="oval").unwrapped
     fixed.reset(seed=0)
     assert not fixed.prepare_reset()  # a fixed track: nothing to generate
+
+
+@pytest.mark.parametrize("point", ["corners", "add"])
+def test_a_reset_interrupted_while_the_world_changes_track_leaves_the_env_right(
+        monkeypatch, point: str) -> None:
+    """A Ctrl-C while the env's world moves to a new track (``World.set_track``: as it
+    makes the cartons, or as it adds them after taking the old ones out): the next
+    reset, even onto the track before, puts the world on its track with exactly its
+    cartons; episodes match a fresh env's."""
+    import tfalda_sim.world as world_module
+    from tfalda_sim.tracks.rules import obstacle_corners
+
+    env = TfaldaTrackEnv(obstacles=True)
+    env.reset(seed=0, options={"track": 3})
+    owner = world_module if point == "corners" else world_module.pymunk.Space
+    name = "obstacle_corners" if point == "corners" else "add"
+    real = getattr(owner, name)
+    calls: list[int] = []
+
+    def interrupted(*args: Any) -> Any:
+        calls.append(1)
+        if len(calls) == 2 or point == "add":
+            raise KeyboardInterrupt
+        return real(*args)
+
+    monkeypatch.setattr(owner, name, interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        env.reset(seed=1, options={"track": 9})
+    monkeypatch.undo()
+    fresh = TfaldaTrackEnv(obstacles=True)
+    for seed, spec in ((2, 3), (3, 9)):
+        obs, _ = env.reset(seed=seed, options={"track": spec})
+        want, _ = fresh.reset(seed=seed, options={"track": spec})
+        world = env.unwrapped._world
+        assert world.track == fresh.unwrapped._world.track
+        cartons = [s for s in world.space.shapes if s is not world.shape]
+        assert len(cartons) == len(world.track.obstacles) > 0
+        for k, shape in enumerate(world.obstacle_shapes):
+            assert shape in cartons
+            got = sorted(tuple(v) for v in shape.get_vertices())  # pymunk's own order
+            want_corners = sorted(map(tuple, obstacle_corners(world.track, k)))
+            np.testing.assert_allclose(got, want_corners)
+        np.testing.assert_array_equal(obs, want)
+        for _ in range(40):
+            a = env.step(np.array([0.4], np.float32))
+            b = fresh.step(np.array([0.4], np.float32))
+            np.testing.assert_array_equal(a[0], b[0])
+            assert a[1:4] == b[1:4]
+            if a[2] or a[3]:
+                break
+
+
+def test_a_reset_takes_the_envs_car_as_it_is_now() -> None:
+    """The env keeps its world (and pymunk space) across resets, but not its car: a car
+    changed between episodes drives the next one."""
+    from dataclasses import replace
+
+    env = TfaldaTrackEnv(track="oval")
+    env.reset(seed=0)
+    world = env._world
+    env.reset(seed=1)
+    assert env._world is world  # kept
+    env.car = replace(env.car, max_steer_rad=0.5 * env.car.max_steer_rad)
+    env.reset(seed=2)
+    assert env._world is not world and env._world.car is env.car

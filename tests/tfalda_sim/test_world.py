@@ -162,3 +162,51 @@ def test_a_world_moved_to_another_track_drives_as_a_new_one() -> None:
     moved.set_track(with_cartons)
     moved.reset(lane_start(with_cartons, ob.s_m, lateral))
     assert moved.collided
+
+
+def test_set_track_keeps_only_the_current_cartons_alive() -> None:
+    """pymunk's static body keeps every shape made on it: the cartons of earlier tracks
+    must be let go, or a long run on new tracks grows without bound."""
+    three, nine = generated(3), generated(9)
+    world = World(three)
+    for k in range(30):
+        track = nine if k % 2 else three
+        world.set_track(track)
+        assert len(world.space.static_body.shapes) == len(track.obstacles)
+        assert len(world.space.shapes) == 1 + len(track.obstacles)  # the car's body too
+
+
+def test_set_track_interrupted_then_called_again_is_right(monkeypatch) -> None:
+    """A Ctrl-C inside ``set_track`` (at each carton it makes, or as it adds them) leaves a
+    world that the next ``set_track`` puts right: the same cartons and collisions as a new
+    world's."""
+    import tfalda_sim.world as world_module
+
+    three, nine = generated(3), generated(9)
+    ob = nine.obstacles[0]
+    where = lane_start(nine, ob.s_m, (-1.0 if ob.lane.value == "right" else 1.0)
+                       * 0.5 * nine.lane_width_m)
+    real_corners, real_add = world_module.obstacle_corners, world_module.pymunk.Space.add
+    for point in ("corners", "add"):
+        world = World(three)
+        calls = []
+
+        def interrupted(*args, real=real_corners if point == "corners" else real_add,
+                        calls=calls):
+            calls.append(1)
+            if len(calls) == 2:
+                raise KeyboardInterrupt
+            return real(*args)
+
+        if point == "corners":
+            monkeypatch.setattr(world_module, "obstacle_corners", interrupted)
+        else:
+            monkeypatch.setattr(world_module.pymunk.Space, "add", interrupted)
+            calls.append(1)  # the first add of the next call is the cartons'
+        with pytest.raises(KeyboardInterrupt):
+            world.set_track(nine)
+        monkeypatch.undo()
+        world.set_track(nine)
+        assert len(world.space.shapes) == 1 + len(nine.obstacles)
+        world.reset(where)
+        assert world.collided

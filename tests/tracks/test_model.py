@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace as _replace
 
 import numpy as np
 import pytest
@@ -165,7 +166,6 @@ def test_a_gap_of_negative_length_is_refused() -> None:
 def test_tracks_with_the_same_road_share_their_index() -> None:
     """A copy with other cartons or gaps (the env drops the cartons) reuses the spatial
     index; another road gets its own."""
-    from dataclasses import replace as _replace
 
     from tfalda_sim.tracks import generate
 
@@ -229,6 +229,15 @@ def test_with_elements_is_replace_keeping_what_the_road_computed() -> None:
         np.testing.assert_array_equal(getattr(copy.table, name), getattr(want.table, name))
     assert track.obstacles and track.name != "copy"  # the original is left as it was
     assert pickle.loads(pickle.dumps(copy)) == copy
+    # The obstacles' corners, once computed, belong to those obstacles: a copy with other
+    # cartons has its own (as replace's), one with the same keeps them.
+    assert len(track.obstacle_corners_m) == len(track.obstacles)
+    assert copy.obstacle_corners_m.shape == (0, 4, 2)
+    one = track.with_elements(obstacles=track.obstacles[-1:])
+    np.testing.assert_array_equal(
+        one.obstacle_corners_m, dataclasses.replace(track, obstacles=track.obstacles[-1:])
+        .obstacle_corners_m)
+    assert track.with_elements(name="x").obstacle_corners_m is track.obstacle_corners_m
     with pytest.raises(TypeError, match=r"lane_width_m; use dataclasses\.replace"):
         track.with_elements(lane_width_m=0.5)
 
@@ -299,15 +308,18 @@ def _same_bits(a: object, b: object) -> bool:
     return a.shape == b.shape and a.tobytes() == b.tobytes()
 
 
-@pytest.mark.parametrize("name", ["seed-3", "seed-11", "oval", "open"])
+@pytest.mark.parametrize("name", ["seed-3", "seed-11", "oval", "oval -0.0", "open"])
 def test_pose_gives_the_bits_of_the_numpy_expressions(name: str) -> None:
     """``Track.pose`` (two kernels around numpy's sine and cosine) gives bit for bit what
-    the numpy expressions give: every arc length, wrapped or not, scalars, vectors and
-    2-d arrays, with a lateral offset per query or one for all, and a straight whose
-    start heading is −0.0 (whose heading h0 + 0·u is +0.0)."""
+    the numpy expressions give: every arc length, wrapped or not (−0.0 too), scalars,
+    vectors and 2-d arrays, with a lateral offset per query, one for all or one of
+    another shape (x and y broadcast, the heading keeps the shape of s), and a straight
+    whose start heading is −0.0 (whose heading h0 + 0·u is +0.0)."""
     if name == "open":
         track = Track((Straight(1.0), Arc(2.0, 1.0), Straight(0.5)), closed=False,
                       start=Pose(0.3, -0.2, -0.0))
+    elif name == "oval -0.0":
+        track = _replace(load_named("oval"), start=Pose(1.0, 2.0, -0.0))
     elif name == "oval":
         track = load_named("oval")
     else:
@@ -330,6 +342,12 @@ def test_pose_gives_the_bits_of_the_numpy_expressions(name: str) -> None:
         (rng.uniform(0.0, total, (3, 4)), rng.uniform(-0.5, 0.5, (3, 4))),
         (np.clip(ends, 0.0, total), -0.1),
         (0.0, 0.0),
+        (-0.0, 0.0),
+        (1.0, np.array([0.1, 0.2])),
+        (rng.uniform(0.0, total, 3), rng.uniform(-0.5, 0.5, (2, 1))),
+        (rng.uniform(0.0, total, (3, 1)), rng.uniform(-0.5, 0.5, 3)),
+        (rng.uniform(0.0, total, 3), np.array([[0.1]])),
+        (0.5, np.array([0.2])),
     ]
     for s, lateral in queries:
         got, want = track.pose(s, lateral), _numpy_pose(track, s, lateral)

@@ -9,7 +9,6 @@ does, and a state forced from outside overrides it.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 from enum import Enum
 
@@ -62,14 +61,7 @@ def row_geometry(layout: RoiLayout) -> list[tuple[int, int]]:
 
 def initial_rois(layout: RoiLayout) -> list[tuple[Roi, Roi]]:
     """The start-up ROIs, (left, right) per row, top to bottom: the layout's table for two
-    rows; for more rows the table's x and width interpolated (and extrapolated) in y.
-    A new list each call (of immutable ROIs, computed once per layout: every reset of a
-    detector asks)."""
-    return list(_initial_rois(layout))
-
-
-@functools.lru_cache(maxsize=16)
-def _initial_rois(layout: RoiLayout) -> tuple[tuple[Roi, Roi], ...]:
+    rows; for more rows the table's x and width interpolated (and extrapolated) in y."""
     out = []
     ul, ur, ll, lr = layout.table_px
     for y, h in row_geometry(layout):
@@ -80,7 +72,7 @@ def _initial_rois(layout: RoiLayout) -> tuple[tuple[Roi, Roi], ...]:
         right_w = round(ur[2] + t * (lr[2] - ur[2]))
         out.append((clamp(Roi(left_x, y, left_w, h), layout),
                     clamp(Roi(right_x, y, right_w, h), layout)))
-    return tuple(out)
+    return out
 
 
 def row_lambda_scales(layout: RoiLayout) -> list[float]:
