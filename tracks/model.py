@@ -294,12 +294,8 @@ class Track:
             raise ValueError("arc length s must be finite")
         if self.closed:
             s = np.mod(s, total)
-        elif np.any((s < -1e-9) | (s > total + 1e-9)):
-            bad = s[(s < -1e-9) | (s > total + 1e-9)].ravel()[0]
-            raise ValueError(
-                f"s = {bad:.6g} m is outside the open track [0, {total:.6g}] m; "
-                "only closed tracks wrap around"
-            )
+        else:
+            self._check_open_range(s)
         t = self.table
         # maximum/minimum: np.clip's own checks cost more than the search, per query
         idx = np.minimum(np.maximum(np.searchsorted(t.s0, s, side="right") - 1, 0),
@@ -365,8 +361,8 @@ class Track:
         outside = (s < -1e-9) | (s > total + 1e-9)
         if np.any(outside):
             raise ValueError(
-                f"s = {s[outside][0]:.6g} m is outside the open track [0, {total:.6g}] m; "
-                "only closed tracks wrap around")
+                f"s = {s[outside].ravel()[0]:.6g} m is outside the open track "
+                f"[0, {total:.6g}] m; only closed tracks wrap around")
 
     def position(self, s: np.ndarray | float, lateral_m: np.ndarray | float = 0.0) -> np.ndarray:
         """World position ``(..., 2)`` [m] at arc length ``s`` [m] and lateral offset [m]."""
