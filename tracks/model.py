@@ -286,22 +286,6 @@ class Track:
         return min(radii) if radii else math.inf
 
     # ----------------------------------------------------------- forward query
-    def _segment_of(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Segment index and local coordinate [m] for arc lengths ``s`` [m]."""
-        total = self.length_m
-        s = np.asarray(s, dtype=np.float64)
-        if not np.isfinite(s).all():
-            raise ValueError("arc length s must be finite")
-        if self.closed:
-            s = np.mod(s, total)
-        else:
-            self._check_open_range(s)
-        t = self.table
-        # maximum/minimum: np.clip's own checks cost more than the search, per query
-        idx = np.minimum(np.maximum(np.searchsorted(t.s0, s, side="right") - 1, 0),
-                         len(t.s0) - 1)
-        return idx, s - t.s0[idx]
-
     def pose(self, s: np.ndarray | float, lateral_m: np.ndarray | float = 0.0
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """World ``x [m], y [m], heading [rad]`` at arc length ``s`` and lateral offset
@@ -321,9 +305,24 @@ class Track:
             x, y, _ = self.pose(np.broadcast_to(s, np.broadcast_shapes(shape, lat.shape)),
                                 np.broadcast_to(lat, np.broadcast_shapes(shape, lat.shape)))
             return x, y, self.pose(s)[2]
-        flat = s.reshape(-1)
-        lat_flat = lat.reshape(-1)
-        s0, h0, kappa, total, closed, sin_h0, cos_h0, x0, y0 = self._pose_args
+        idx, u, heading, slot, angles = self._chain(s.reshape(-1))
+        _, _, kappa, _, _, sin_h0, cos_h0, x0, y0 = self._pose_args
+        x, y = chain_points(idx, u, slot, sin_h0, cos_h0, np.sin(angles), np.cos(angles),
+                            x0, y0, kappa, np.ascontiguousarray(lat.reshape(-1)))
+        if lat.ndim > len(shape):  # one offset, as an array of more dimensions than s
+            out = np.broadcast_shapes(shape, lat.shape)
+            return x.reshape(out), y.reshape(out), heading.reshape(shape)[()]
+        if not shape:
+            return x[0], y[0], heading[0]
+        return x.reshape(shape), y.reshape(shape), heading.reshape(shape)
+
+    def _chain(self, flat: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``chain_angles`` of the 1-D arc lengths ``flat`` [m] on this track (its segment,
+        local coordinate, heading and listed angles per query): a closed track's wrapped
+        as ``np.mod`` wraps them, an open track's checked to lie on it, non-finite ones
+        refused."""
+        s0, h0, kappa, total, closed = self._pose_args[:5]
         answer, idx, u, heading, slot, angles = chain_angles(flat, s0, h0, kappa, total,
                                                              closed)
         if answer == CHAIN_WRAP:
@@ -334,18 +333,11 @@ class Track:
                                                                  False)
         if answer == CHAIN_NOT_FINITE:
             raise ValueError("arc length s must be finite")
-        if answer != CHAIN_OK:  # the kernel below would read unwritten indices
+        if answer != CHAIN_OK:  # the kernels after it would read unwritten indices
             raise RuntimeError(f"chain_angles answered {answer}")
         if not closed:
             self._check_open_range(flat)
-        x, y = chain_points(idx, u, slot, sin_h0, cos_h0, np.sin(angles), np.cos(angles),
-                            x0, y0, kappa, np.ascontiguousarray(lat_flat))
-        if lat.ndim > len(shape):  # one offset, as an array of more dimensions than s
-            out = np.broadcast_shapes(shape, lat.shape)
-            return x.reshape(out), y.reshape(out), heading.reshape(shape)[()]
-        if not shape:
-            return x[0], y[0], heading[0]
-        return x.reshape(shape), y.reshape(shape), heading.reshape(shape)
+        return idx, u, heading, slot, angles
 
     @cached_property
     def _pose_args(self) -> tuple:
@@ -394,8 +386,9 @@ class Track:
 
     def curvature(self, s: np.ndarray | float) -> np.ndarray:
         """Signed centre-line curvature [1/m] at arc length ``s`` [m] (left > 0)."""
-        idx, _ = self._segment_of(s)
-        return self.table.kappa[idx]
+        s = np.asarray(s, dtype=np.float64)
+        idx = self._chain(s.reshape(-1))[0]
+        return self.table.kappa[idx.reshape(s.shape)[()]]
 
     def sample(self, step_m: float) -> tuple[np.ndarray, np.ndarray]:
         """Arc lengths [m] every ``step_m`` (and the end for open tracks) and their
