@@ -17,7 +17,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .candidates import find_lane, resample, segment_steps, sobel_horizontal_edges
+from .candidates import (
+    find_lane_in_crop,
+    resample_shape,
+    segment_steps,
+    sobel_horizontal_edges,
+)
 from .lis import LaneInferenceSystem, LisResult, Rows
 from .params import DetectorConfig, EdgeMode, RoiLayout
 from .rois import (
@@ -252,16 +257,16 @@ class TfaldaDetector:
         horizontal = (tcfg.sobel_manager and prev is not None
                       and sobel_horizontal_edges(prev.d, prev.y_bottom - prev.y_top,
                                                  tcfg.sobel_switch_angle_deg))
-        small = resample(crop, tcfg)
+        small_h, small_w = resample_shape(*crop.shape, tcfg)
         # Back to image coordinates (listing A.6 normalize_vector: × resample factor + ROI
         # offset), pixel centre to pixel centre and with the crop's exact factor [px]; the
         # first frame takes the largest I, later ones the smallest λ (first of equals).
         kp, kd = tcfg.kp, tcfg.kd
         if lambda_scale != 1.0:
             kp, kd = kp / lambda_scale, kd / lambda_scale
-        p, d, i, lam = find_lane(
-            small, segment_steps(*small.shape), horizontal,
-            tcfg.edge_mode is EdgeMode.RISING, float(roi.x), roi.width / small.shape[1],
+        p, d, i, lam = find_lane_in_crop(
+            crop, small_h, small_w, segment_steps(small_h, small_w), horizontal,
+            tcfg.edge_mode is EdgeMode.RISING, float(roi.x), roi.width / small_w,
             prev is None,
             *((prev.p, prev.d, prev.i) if prev is not None else (0.0, 0.0, 0.0)),
             kp, kd, tcfg.ki)

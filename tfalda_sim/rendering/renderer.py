@@ -831,8 +831,10 @@ class Renderer:
 
         All windows of a call are rendered together, row by row, so four small ROIs cost
         little more than their pixels."""
-        x, y, yaw = (float(v) for v in pose)
-        if not all(math.isfinite(v) for v in (x, y, yaw, speed_m_s)):
+        x, y, yaw = pose  # every frame: no generators (µs each)
+        x, y, yaw = float(x), float(y), float(yaw)
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw)
+                and math.isfinite(speed_m_s)):
             raise ValueError(f"pose and speed must be finite, got {pose}, {speed_m_s}")
         width, height = self.camera.width, self.camera.height
         boxes = self._windows.get(key := tuple(map(tuple, windows)))
@@ -888,7 +890,7 @@ class Renderer:
         full_frame = len(boxes) == 1 and boxes[0] == (0, 0, width, height)
         uv, bbox, shading = visible_faces(self.camera, box_faces, (x, y, yaw),
                                           scene.hall.distance_m, None if full_frame else boxes)
-        drawn = draw_faces(uv, bbox, fx.line_dn * shading, width, height)
+        drawn = draw_faces(uv, bbox, fx.line_dn * shading, width, height) if len(uv) else None
         out = np.empty(st.out_len, np.uint8)
         noise_offset = _noise_offset(frame_seed, width * height)
         pieces = (out, st.out_offsets, st.rows, st.cols, st.widths)
