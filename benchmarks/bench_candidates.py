@@ -17,6 +17,11 @@ All must give the same candidates. Reported: µs per ROI, the ratios to the curr
 kernel, and the work against one core's SIMD: the useful int32 additions ``Σ n·m``
 (n samples of m starts per end offset), the ones executed with padding, and the
 additions per ns that makes.
+
+Then the detector's whole per-ROI path on the same crops (resize, Sobel, search, the
+lane's choice): the current ``find_lane_in_crop`` (the resize in numba, one call) against
+the previous one (issue 18's twelfth session: ``cv2.resize``, then ``find_lane``), which
+must pick the same lanes.
 """
 
 from __future__ import annotations
@@ -34,7 +39,11 @@ from tfalda_sim.perception import DetectorConfig
 from tfalda_sim.perception.candidates import (
     SIMD_BLOCK,
     UINT16_MAX_SAMPLES,
+    find_lane,
+    find_lane_in_crop,
     preprocess,
+    resample,
+    resample_shape,
     search_candidates,
     segment_steps,
 )
@@ -111,6 +120,13 @@ def additions(height: int, width: int) -> tuple[int, int]:
 def gradients(n: int) -> list[np.ndarray]:
     """Pre-processed ROIs (uint8 gradient images) of rendered frames."""
     config = DetectorConfig.thesis()
+    return [preprocess(c, config.tfalda, False) for c in roi_crops(n)]
+
+
+def roi_crops(n: int) -> list[np.ndarray]:
+    """ROI crops (uint8) of rendered frames: the thesis' four ROIs along the right lane of
+    the oval and two generated tracks."""
+    config = DetectorConfig.thesis()
     rois = windows(initial_rois(config.layout))
     renderer = Renderer()
     tracks = [load_named("oval"), generate(3), generate(11)]
@@ -122,8 +138,42 @@ def gradients(n: int) -> list[np.ndarray]:
         xs, ys, hs = track.pose(s, -0.5 * track.lane_width_m)
         for k, pose in enumerate(zip(xs, ys, hs, strict=True)):
             crops = renderer.render_windows(scene, tuple(map(float, pose)), rois, frame_seed=k)
-            out += [preprocess(c, config.tfalda, False) for c in crops]
+            out += crops
     return out[:n]
+
+
+def per_roi_paths(n: int, repeat: int) -> dict[str, object]:
+    """The detector's per-ROI path, previous (``cv2.resize`` + ``find_lane``) and current
+    (``find_lane_in_crop``), on ``n`` crops: best µs per ROI and whether the lanes agree."""
+    tcfg = DetectorConfig.thesis().tfalda
+    crops = roi_crops(n)
+    args = (False, True, 120.0)  # vertical edges, rising edges, the ROI's x [px]
+    lane = (False, 30.0, 5.0, 900.0, tcfg.kp, tcfg.kd, tcfg.ki)  # a later frame: λ decides
+
+    def previous(crop: np.ndarray) -> tuple[float, ...]:
+        small = resample(crop, tcfg)
+        return find_lane(small, segment_steps(*small.shape), *args,
+                         crop.shape[1] / small.shape[1], *lane)
+
+    def current(crop: np.ndarray) -> tuple[float, ...]:
+        h, w = resample_shape(*crop.shape, tcfg)
+        return find_lane_in_crop(crop, h, w, segment_steps(h, w), *args, crop.shape[1] / w,
+                                 *lane)
+
+    out: dict[str, object] = {}
+    results = {}
+    for key, path in (("previous", previous), ("current", current)):
+        results[key] = [path(c) for c in crops]  # warm-up (JIT)
+        best = np.inf
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            for c in crops:
+                path(c)
+            best = min(best, time.perf_counter() - t0)
+        out[f"{key}_us_per_roi"] = best / len(crops) * 1e6
+    out["identical_lanes"] = results["previous"] == results["current"]
+    out["speed_up_over_previous"] = out["previous_us_per_roi"] / out["current_us_per_roi"]
+    return out
 
 
 KERNELS: tuple[tuple[str, str, str], ...] = (
@@ -201,7 +251,8 @@ def run(n: int, repeat: int) -> dict[str, object]:
             "speed_up_over_previous_uint16": times["previous_uint16"]
             / times["current_uint16"],
             "speed_up_over_issue_4": times["issue_4"] / times["current"],
-            "useful_additions_per_roi": useful, "executed_additions_per_roi": executed}
+            "useful_additions_per_roi": useful, "executed_additions_per_roi": executed,
+            "per_roi_path": per_roi_paths(n, repeat)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -213,9 +264,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.rois < 1 or args.repeat < 1:
         parser.error("--rois and --repeat must be ≥ 1")
     r = run(args.rois, args.repeat)
+    ok = r["identical_results"] and r["per_roi_path"]["identical_lanes"]
     if args.json:
         print(json.dumps(r))
-        return 0 if r["identical_results"] else 1
+        return 0 if ok else 1
     m = r["machine"]
     print(f"machine: {m['cores']} cores, pinned to one; {r['rois']} ROIs, resampled sizes "
           f"(h, w) {r['roi_sizes_resampled'][0]}…{r['roi_sizes_resampled'][-1]}")
@@ -230,7 +282,12 @@ def main(argv: list[str] | None = None) -> int:
           f"{r['executed_additions_per_roi']:.0f} executed with padding "
           f"({r['kernels']['current_uint16']['executed_additions_per_ns']:.2f} per ns, "
           f"uint16)")
-    return 0 if r["identical_results"] else 1
+    p = r["per_roi_path"]
+    print(f"per-ROI path (resize, Sobel, search): previous (cv2.resize + find_lane) "
+          f"{p['previous_us_per_roi']:.1f} µs, current (find_lane_in_crop) "
+          f"{p['current_us_per_roi']:.1f} µs: {p['speed_up_over_previous']:.2f}×; "
+          f"lanes identical: {p['identical_lanes']}")
+    return 0 if ok else 1
 
 
 if __name__ == "__main__":

@@ -52,6 +52,10 @@ def test_bench_candidates_finds_the_kernels_identical() -> None:
             k[name]["us_per_roi"] / k[current]["us_per_roi"])
     assert result["speed_up_over_previous_uint16"] == pytest.approx(
         k["previous_uint16"]["us_per_roi"] / k["current_uint16"]["us_per_roi"])
+    path = result["per_roi_path"]
+    assert path["identical_lanes"] is True
+    assert path["speed_up_over_previous"] == pytest.approx(
+        path["previous_us_per_roi"] / path["current_us_per_roi"])
 
 
 def test_bench_reset_times_lazy_eager_and_fixed_track_resets() -> None:

@@ -33,6 +33,7 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from ..kernels import LITTLE_ENDIAN, load_pair
 from .params import EdgeMode, TfaldaConfig
 
 
@@ -277,7 +278,8 @@ RESIZE_COEF_BITS: int = 11
 
 
 @njit(cache=True, error_model="numpy")
-def _resize_taps(dst: int, src: int, clamp: bool) -> tuple[np.ndarray, np.ndarray, int]:
+def _resize_taps(dst: int, src: int, clamp: bool
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """OpenCV's bilinear taps along one axis of ``src`` → ``dst`` px: per output pixel the
     first source pixel and the two fixed-point weights (``cv::resize``: the pixel centre's
     source coordinate in float32, its floor, the weights rounded half to even). Along x
@@ -286,8 +288,9 @@ def _resize_taps(dst: int, src: int, clamp: bool) -> tuple[np.ndarray, np.ndarra
     along y the coordinate stays and the rows are clamped when read."""
     scale = 1.0 / (np.float64(dst) / np.float64(src))  # as cv::resize computes it
     one = np.float32(1 << RESIZE_COEF_BITS)
-    first = np.empty(dst, np.int64)
-    weights = np.empty((dst, 2), np.int64)
+    first = np.empty(dst, np.int32)
+    w0 = np.empty(dst, np.int32)
+    w1 = np.empty(dst, np.int32)
     limit = dst
     for d in range(dst):
         f = np.float32((d + 0.5) * scale - 0.5)
@@ -301,9 +304,9 @@ def _resize_taps(dst: int, src: int, clamp: bool) -> tuple[np.ndarray, np.ndarra
                 if s >= src - 1:
                     f, s = np.float32(0.0), src - 1
         first[d] = s
-        weights[d, 0] = np.int64(np.rint(np.float32(np.float32(1.0) - f) * one))
-        weights[d, 1] = np.int64(np.rint(f * one))
-    return first, weights, limit
+        w0[d] = np.int32(np.rint(np.float32(np.float32(1.0) - f) * one))
+        w1[d] = np.int32(np.rint(f * one))
+    return first, w0, w1, limit
 
 
 @njit(cache=True, error_model="numpy")
@@ -314,28 +317,37 @@ def resample_into(crop: np.ndarray, out: np.ndarray) -> None:
     vectorised vertical pass, ``((r0 >> 4)·b0 >> 16) + ((r1 >> 4)·b1 >> 16)`` then
     ``(v + 2) >> 2``, which OpenCV's results follow in every column, tails included (its
     scalar formula, ``(r0·b0 + r1·b1 + 2²¹) >> 22``, differs in ~5 % of pixels). A crop
-    of ``out``'s size is copied. Without OpenCV's ≈ 7–15 µs per call, which was a third
-    of a ROI's detection."""
+    of ``out``'s size is copied. Every sum fits int32 (≤ 255 · 2¹¹ · 2). The two taps of
+    a row are one 16-bit load where the crop's columns are adjacent in memory: ≈ 1.3–2×
+    OpenCV's speed here, without its ≈ 7–15 µs per call."""
     sh, sw = crop.shape
     dh, dw = out.shape
     if sh == dh and sw == dw:
         out[:, :] = crop
         return
-    x_first, alpha, x_limit = _resize_taps(dw, sw, True)
-    y_first, beta, _ = _resize_taps(dh, sh, False)
-    one = np.int64(1 << RESIZE_COEF_BITS)
-    rows = np.empty((2, dw), np.int64)  # the horizontal pass of the two source rows
+    x_first, a0, a1, x_limit = _resize_taps(dw, sw, True)
+    y_first, b0s, b1s, _ = _resize_taps(dh, sh, False)
+    one = np.int32(1 << RESIZE_COEF_BITS)
+    adjacent = crop.strides[1] == 1
+    low = 0 if LITTLE_ENDIAN else 8  # where the left tap's byte sits in a pair
+    top = np.empty(dw, np.int32)  # the horizontal pass of the two source rows
+    bottom = np.empty(dw, np.int32)
     for y in range(dh):
         for k in range(2):  # a downscale reads each source row about once: no row cache
             src = crop[min(max(y_first[y] + k, 0), sh - 1)]
-            dst = rows[k]
-            for x in range(x_limit):
-                s = x_first[x]
-                dst[x] = np.int64(src[s]) * alpha[x, 0] + np.int64(src[s + 1]) * alpha[x, 1]
+            dst = top if k == 0 else bottom
+            if adjacent:
+                for x in range(x_limit):
+                    pair = np.int32(load_pair(src, x_first[x]))
+                    dst[x] = ((pair >> low) & 255) * a0[x] + ((pair >> (8 - low)) & 255) * a1[x]
+            else:
+                for x in range(x_limit):
+                    s = x_first[x]
+                    dst[x] = np.int32(src[s]) * a0[x] + np.int32(src[s + 1]) * a1[x]
             for x in range(x_limit, dw):
-                dst[x] = np.int64(src[x_first[x]]) * one
-        b0, b1 = beta[y, 0], beta[y, 1]
-        top, bottom, o = rows[0], rows[1], out[y]
+                dst[x] = np.int32(src[x_first[x]]) * one
+        b0, b1 = b0s[y], b1s[y]
+        o = out[y]
         for x in range(dw):
             v = (((top[x] >> 4) * b0) >> 16) + (((bottom[x] >> 4) * b1) >> 16)
             o[x] = np.uint8(min(max((v + 2) >> 2, 0), 255))

@@ -23,7 +23,6 @@ from __future__ import annotations
 import functools
 import itertools
 import math
-import sys
 from dataclasses import dataclass
 
 import cv2
@@ -34,6 +33,7 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from ..camera import Camera, FisheyeCamera
+from ..kernels import LITTLE_ENDIAN, load_pair
 from .effects import Effects
 from .obstacles import BoxFaces, draw_faces, visible_faces
 from .pixels import Bonnet, pixel_geometry
@@ -82,32 +82,11 @@ def _fma32(typingctx, a, b, c):  # type: ignore[no-untyped-def]  # numba's signa
     return types.float32(types.float32, types.float32, types.float32), codegen
 
 
-_LITTLE_ENDIAN = sys.byteorder == "little"
-"""A compile-time constant of the kernels: the byte order of a 16-bit value."""
-
-
-@intrinsic
-def _load_pair(typingctx, flat, k):  # type: ignore[no-untyped-def]  # numba's signature
-    """``flat[k]`` and ``flat[k + 1]`` (uint8 array, in bounds) in one unaligned 16-bit
-    load: the two horizontal taps of a bilinear sample. Stored to a uint16 array, its
-    bytes are those two in that order, whatever the byte order."""
-    if not (isinstance(flat, types.Array) and flat.dtype == types.uint8
-            and isinstance(k, types.Integer)):
-        return None
-
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
-        data = context.make_array(signature.args[0])(context, builder, args[0]).data
-        pair = builder.bitcast(builder.gep(data, [args[1]]), ir.IntType(16).as_pointer())
-        return builder.load(pair, align=1)
-
-    return types.uint16(flat, k), codegen
-
-
 @njit(cache=True, error_model="numpy")
 def _taps_at_border(flat: np.ndarray, h: int, w: int, ix: int, iy: int) -> tuple[int, int]:
-    """``_load_pair`` of rows ``iy`` and ``iy + 1`` at column ``ix`` for a sample that is
+    """``load_pair`` of rows ``iy`` and ``iy + 1`` at column ``ix`` for a sample that is
     not inside the atlas: taps outside read 0."""
-    shift = 8 if _LITTLE_ENDIAN else 0  # of the right tap: its byte comes second
+    shift = 8 if LITTLE_ENDIAN else 0  # of the right tap: its byte comes second
     a = 0
     b = 0
     for dy in range(2):
@@ -148,8 +127,8 @@ def _bilinear(out: np.ndarray, flat: np.ndarray, h: np.int32, w: np.int32, mx: n
     for j in range(n):
         k = at[j]
         if k >= 0:
-            top[j] = _load_pair(flat, k)
-            bottom[j] = _load_pair(flat, k + w)
+            top[j] = load_pair(flat, k)
+            bottom[j] = load_pair(flat, k + w)
         else:
             top[j], bottom[j] = _taps_at_border(flat, h, w, int(math.floor(mx[j])),
                                                 int(math.floor(my[j])))

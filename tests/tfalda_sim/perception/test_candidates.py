@@ -308,7 +308,8 @@ ones that stretch a 1-px-high crop's 2 output rows (y upsampled, x not)."""
 def test_resample_into_equals_opencv_resize(factor: float) -> None:
     """``resample_into`` (the detector's resize) gives ``cv2.resize``'s bilinear result bit
     for bit for crops from 1 × 1 px to wider than any ROI, random and black-and-white
-    content, contiguous and strided (a crop of a whole frame). OpenCV rounds its vertical
+    content, contiguous, strided rows (a crop of a whole frame) and strided columns (the
+    paired tap loads do not apply). OpenCV rounds its vertical
     pass in a way the plain fixed-point formula does not: ~5 % of pixels differ by 1
     with ``(r0·b0 + r1·b1 + 2²¹) >> 22``, so a port of the textbook formula fails here."""
     from tfalda_sim.perception.candidates import resample, resample_into, resample_shape
@@ -322,7 +323,9 @@ def test_resample_into_equals_opencv_resize(factor: float) -> None:
             frame = rng.integers(0, 256, (h + 3, w + 5), dtype=np.uint8)
             if (h + w) % 2:
                 frame = np.where(frame < 128, 0, 255).astype(np.uint8)  # hard edges
-            for crop in (np.ascontiguousarray(frame[:h, :w]), frame[2:h + 2, 3:w + 3]):
+            wide = np.repeat(frame[:h, :w], 2, axis=1)  # its every other column: a crop
+            for crop in (np.ascontiguousarray(frame[:h, :w]), frame[2:h + 2, 3:w + 3],
+                         wide[:, ::2]):  # whose pixels are not adjacent in memory
                 want = resample(crop, config)
                 got = np.full(resample_shape(h, w, config), 7, np.uint8)
                 resample_into(crop, got)
