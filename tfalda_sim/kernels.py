@@ -1,5 +1,9 @@
 """Numba building blocks shared by kernels of several packages (the lowest layer: it
-imports nothing of ours)."""
+imports nothing of ours).
+
+numba's on-disk cache (``cache=True``) keys a kernel on its own file only: after an edit
+here, delete the ``__pycache__`` folders, or the kernels that use these keep the old
+code."""
 
 from __future__ import annotations
 
