@@ -322,6 +322,8 @@ def resample_into(crop: np.ndarray, out: np.ndarray) -> None:
     OpenCV's speed here, without its ≈ 7–15 µs per call."""
     sh, sw = crop.shape
     dh, dw = out.shape
+    if sh < 1 or sw < 1 or dh < 1 or dw < 1:
+        raise ValueError("resample_into: crop and out must be at least 1 × 1 px")
     if sh == dh and sw == dw:
         out[:, :] = crop
         return

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from fractions import Fraction
 
+import cv2
 import numpy as np
 import pytest
 
@@ -330,7 +331,21 @@ def test_resample_into_equals_opencv_resize(factor: float) -> None:
                 got = np.full(resample_shape(h, w, config), 7, np.uint8)
                 resample_into(crop, got)
                 assert got.shape == want.shape
-                assert np.array_equal(got, want), (factor, h, w)
+                assert np.array_equal(got, want), (
+                    f"{h} × {w} px at factor {factor}: cv2.resize of OpenCV {cv2.__version__} "
+                    "rounds otherwise than OpenCV 5.1 on x86-64, which resample_into follows")
+
+
+def test_resample_into_refuses_empty_images() -> None:
+    """An empty crop or output raises (OpenCV asserts too) instead of reading memory
+    outside the crop."""
+    from tfalda_sim.perception.candidates import resample_into
+
+    for crop, out in ((np.zeros((0, 5), np.uint8), np.zeros((2, 2), np.uint8)),
+                      (np.zeros((5, 0), np.uint8), np.zeros((2, 1), np.uint8)),
+                      (np.zeros((5, 5), np.uint8), np.zeros((2, 0), np.uint8))):
+        with pytest.raises(ValueError, match="at least 1 × 1"):
+            resample_into(crop, out)
 
 
 @pytest.mark.parametrize("seed", range(8))
