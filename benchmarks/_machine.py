@@ -15,6 +15,32 @@ def pin_to_one_core() -> None:
     cv2.setNumThreads(1)
 
 
+SIMD_FLAGS: tuple[str, ...] = ("avx512f", "avx2", "avx", "sse4_2", "neon", "asimd")
+"""CPU flags named in ``cpu()``'s vector instruction set, widest first."""
+
+
+def cpu() -> dict[str, str]:
+    """The CPU's model name and its widest vector instruction set (Linux's
+    ``/proc/cpuinfo``; ``platform.processor()`` elsewhere): figures of different sessions
+    compare only on the same CPU, and this VM's host has changed between sessions (2.0 GHz
+    in the sixth to twelfth, a 2.8 GHz Xeon with AVX-512 in the thirteenth)."""
+    model, flags = platform.processor() or platform.machine(), set()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
+            for line in f:
+                key, _, value = line.partition(":")
+                key = key.strip()
+                if key in ("model name", "Model", "Hardware") and model == (
+                        platform.processor() or platform.machine()):
+                    model = value.strip()
+                elif key in ("flags", "Features") and not flags:
+                    flags = set(value.split())
+    except OSError:
+        pass
+    simd = next((flag for flag in SIMD_FLAGS if flag in flags), "unknown")
+    return {"cpu": model or "unknown", "simd": simd}
+
+
 def machine() -> dict[str, object]:
-    return {"cores": os.cpu_count(), "pinned_to_one_core": True,
+    return {"cores": os.cpu_count(), **cpu(), "pinned_to_one_core": True,
             "opencv_threads": cv2.getNumThreads(), "python": platform.python_version()}

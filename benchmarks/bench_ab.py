@@ -34,6 +34,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from _machine import cpu
+
 CHILD_FLAG = "--child"
 TURNS_FLAG = "--child-turns"
 
@@ -204,7 +206,7 @@ def run_turns(other: str, steps: int, resets: int, quiet: bool) -> dict[str, obj
             if seconds[side]["generated"] else float("nan"),
             "reset_median_ms": float(statistics.median(times[side]) * 1000.0)
             if times[side] else float("nan")}
-    return {"machine": {"cores": os.cpu_count(), "one_core_in_turns": core},
+    return {"machine": {"cores": os.cpu_count(), **cpu(), "one_core_in_turns": core},
             "other_python": other, "steps": done["fixed"], "resets": done["reset"],
             "turn_steps": TURN_STEPS, "turn_resets": TURN_RESETS,
             "this": figures["this"], "other": figures["other"],
@@ -251,7 +253,7 @@ def run(other: str, steps: int, resets: int, pairs: int, quiet: bool) -> dict[st
                      "ratio": {key: this[key] / that[key] for key in this}})
         if not quiet:
             print(f"pair {k + 1}/{pairs} done", file=sys.stderr)
-    return {"machine": {"cores": os.cpu_count(), "pinned_one_core_each": True},
+    return {"machine": {"cores": os.cpu_count(), **cpu(), "pinned_one_core_each": True},
             "other_python": other, "steps": steps, "resets": resets, "pairs": rows,
             "interrupted": interrupted}
 
@@ -301,7 +303,8 @@ def main(argv: list[str] | None = None) -> int:
                      "finished")
     if args.json:
         return status
-    print(f"machine: {result['machine']['cores']} cores, one process pinned to each; "
+    print(f"machine: {result['machine']['cores']} cores of {result['machine']['cpu']}, "
+          "one process pinned to each; "
           f"other: {args.other}")
     print(f"{'pair':<6}{'figure':<24}{'other':>10}{'this':>10}{'this/other':>12}")
     for row in result["pairs"]:  # type: ignore[union-attr]
@@ -328,7 +331,8 @@ def _report_turns(result: dict[str, Any], args: argparse.Namespace) -> int:
                      "resets per checkout finished")
     if args.json:
         return status
-    print(f"machine: {result['machine']['cores']} cores; both checkouts on core "
+    print(f"machine: {result['machine']['cores']} cores of {result['machine']['cpu']}; "
+          "both checkouts on core "
           f"{result['machine']['one_core_in_turns']}, in turns of {TURN_STEPS} steps "
           f"({TURN_RESETS} resets); other: {args.other}")
     print(f"{'figure':<24}{'other':>10}{'this':>10}{'this/other':>12}")

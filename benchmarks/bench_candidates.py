@@ -270,7 +270,8 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(r))
         return 0 if ok else 1
     m = r["machine"]
-    print(f"machine: {m['cores']} cores, pinned to one; {r['rois']} ROIs, resampled sizes "
+    print(f"machine: {m['cores']} cores of {m['cpu']} ({m['simd']}), pinned to one; "
+          f"{r['rois']} ROIs, resampled sizes "
           f"(h, w) {r['roi_sizes_resampled'][0]}…{r['roi_sizes_resampled'][-1]}")
     print(f"{'kernel':<34}{'µs/ROI':>9}{'adds/ns':>9}{'× current':>11}")
     for k in r["kernels"].values():

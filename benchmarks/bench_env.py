@@ -316,8 +316,8 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(result))
         return 0
     m = result["machine"]
-    print(f"machine: {m['cores']} cores (single envs pinned to one, OpenCV threads 1), "
-          f"Python {m['python']}")
+    print(f"machine: {m['cores']} cores of {m['cpu']} ({m['simd']}; single envs pinned to "
+          f"one, OpenCV threads 1), Python {m['python']}")
     print(f"{'configuration':<44}{'steps/s':>9}{'ms/step':>9}{'episodes':>9}"
           f"{'× CarRacing':>13}")
     for name, r in result["envs"].items():

@@ -84,7 +84,8 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(result))
         return 0
     m = result["machine"]
-    print(f"machine: {m['cores']} cores, pinned to one, OpenCV threads {m['opencv_threads']}")
+    print(f"machine: {m['cores']} cores of {m['cpu']} ({m['simd']}), pinned to one, "
+          f"OpenCV threads {m['opencv_threads']}")
     print(f"{'preset':<22}{'median':>10}{'p95':>10}{'frames/s':>10}")
     for name, r in result["presets"].items():
         print(f"{name:<22}{r['median_ms']:>8.3f}ms{r['p95_ms']:>8.3f}ms{r['frames_per_s']:>10.0f}")

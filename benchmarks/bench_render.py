@@ -92,7 +92,8 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(result))
         return 0
     m = result["machine"]
-    print(f"machine: {m['cores']} cores, pinned to one, OpenCV threads {m['opencv_threads']}")
+    print(f"machine: {m['cores']} cores of {m['cpu']} ({m['simd']}), pinned to one, "
+          f"OpenCV threads {m['opencv_threads']}")
     print(f"{'effects':<12}{'full median':>13}{'full p95':>11}{'4 ROIs':>10}{'speed-up':>10}"
           f"{'moving ROIs':>13}")
     for name, r in result["effects"].items():

@@ -73,7 +73,8 @@ def run(resets: int, quiet: bool) -> dict[str, object]:
 
 def print_table(r: dict) -> None:
     m = r["machine"]
-    print(f"machine: {m['cores']} cores (pinned to one), Python {m['python']}")
+    print(f"machine: {m['cores']} cores of {m['cpu']} ({m['simd']}; pinned to one), "
+          f"Python {m['python']}")
     print(f"{'env.reset() (lanes mode)':<32}{'median':>10}{'p95':>10}{'max':>10}")
     for name, t in r["reset"].items():
         print(f"{name:<32}{t['median_ms']:>8.2f}ms{t['p95_ms']:>8.2f}ms{t['max_ms']:>8.2f}ms")

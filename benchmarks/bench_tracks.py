@@ -17,6 +17,7 @@ import sys
 import time
 
 import numpy as np
+from _machine import cpu
 from tqdm import tqdm
 
 from tfalda_sim.tracks import generate, load_named, rasterize, validate
@@ -70,7 +71,7 @@ def run(seeds: int, raster_seeds: int, quiet: bool) -> dict[str, object]:
                         "locate_us": single * 1e6, "locate_many_us_per_point": batch * 1e6}
 
     return {
-        "machine": {"cores": os.cpu_count(), "python": platform.python_version(),
+        "machine": {"cores": os.cpu_count(), **cpu(), "python": platform.python_version(),
                     "processor": platform.processor() or platform.machine()},
         "generate": {"seeds": seeds, "invalid": invalid, **_ms(gen_t),
                      "median_length_m": statistics.median(lengths)},
@@ -83,7 +84,8 @@ def run(seeds: int, raster_seeds: int, quiet: bool) -> dict[str, object]:
 
 def print_table(r: dict) -> None:
     g, v, ra = r["generate"], r["validate"], r["rasterize"]
-    print(f"machine: {r['machine']['cores']} cores, Python {r['machine']['python']}")
+    m = r["machine"]
+    print(f"machine: {m['cores']} cores of {m['cpu']} ({m['simd']}), Python {m['python']}")
     print(f"{'stage':<28}{'median':>10}{'p95':>10}{'max':>10}  note")
     print(f"{'generate (incl. checks)':<28}{g['median_ms']:>8.2f}ms{g['p95_ms']:>8.2f}ms"
           f"{g['max_ms']:>8.2f}ms  {g['seeds']} seeds, {len(g['invalid'])} invalid, "

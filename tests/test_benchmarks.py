@@ -36,6 +36,14 @@ def test_bench_env_reports_every_configuration_against_car_racing() -> None:
     assert set(result["ratios"]) == {"make_vec 2 envs / 1 env",
                                      "2 processes at once / 1 (the machine's ceiling)",
                                      "generated / fixed track (lanes)"}
+    # The CPU is named (figures compare only on one CPU; the host changes between runs).
+    machine = result["machine"]
+    assert machine["cores"] == os.cpu_count() and machine["simd"] != ""
+    cpuinfo = Path("/proc/cpuinfo")
+    models = [line.partition(":")[2].strip() for line in
+              (cpuinfo.read_text(errors="replace").splitlines() if cpuinfo.exists() else [])
+              if line.partition(":")[0].strip() == "model name"]
+    assert machine["cpu"] == (models[0] if models else machine["cpu"]) and machine["cpu"]
 
 
 def test_bench_candidates_finds_the_kernels_identical() -> None:
