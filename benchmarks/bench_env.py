@@ -109,15 +109,23 @@ def vector_steps_per_second(make: Callable[[], gym.vector.VectorEnv], steps: int
     return interleaved_vector_steps_per_second({desc: make}, steps, quiet)[desc]
 
 
-class _VectorTurns:
-    """A vector env stepped in turns (``interleaved_vector_steps_per_second``)."""
+VECTOR_SEED_STRIDE = 1000
+"""Reset seeds of the vector envs measured together: the k-th starts from ``k ×`` this.
+Envs of one process with the same seed draw the same tracks, and a generated track is one
+object per process (``GENERATE_CACHE_SIZE``): the second env on it would find its marking
+map painted by the first, paint less and read faster than it is."""
 
-    def __init__(self, venv: gym.vector.VectorEnv) -> None:
+
+class _VectorTurns:
+    """A vector env stepped in turns (``interleaved_vector_steps_per_second``), reset with
+    ``seed`` (env i: ``seed + i``)."""
+
+    def __init__(self, venv: gym.vector.VectorEnv, seed: int = 0) -> None:
         self.venv = venv
         self.num_envs = venv.num_envs
         try:
-            venv.action_space.seed(0)
-            venv.reset(seed=0)
+            venv.action_space.seed(seed)
+            venv.reset(seed=seed)
             for _ in range(WARMUP_STEPS):
                 venv.step(venv.action_space.sample())
         except BaseException:
@@ -215,17 +223,19 @@ class _SoloProcessTurns:
 
 def interleaved_vector_steps_per_second(makes: dict[str, Callable[[], Any]], steps: int,
                                         quiet: bool) -> dict[str, dict[str, float]]:
-    """Env steps/s of several vector envs (autoreset inside) at once: each made and warmed
-    up (``WARMUP_STEPS`` vector steps), then all stepped in turns of about ``CHUNK_STEPS``
+    """Env steps/s of several vector envs (autoreset inside) at once: each made, reset
+    with its own seeds (``VECTOR_SEED_STRIDE``) and warmed up (``WARMUP_STEPS`` vector
+    steps), then all stepped in turns of about ``CHUNK_STEPS``
     env steps (``CHUNK_STEPS // num_envs`` vector steps) until each has made about
     ``steps``; one's time is the sum of its turns. ``makes`` give a vector env, or a
     ``_SoloProcessTurns``. Idle vector envs' workers sleep on their pipes (waking every
     ``BOARD_NAP_S``), so a turn has the machine to itself."""
     runners: dict[str, Any] = {}
     try:
-        for name, make in makes.items():
+        for k, (name, make) in enumerate(makes.items()):
             made = make()
-            runners[name] = made if isinstance(made, _SoloProcessTurns) else _VectorTurns(made)
+            runners[name] = (made if isinstance(made, _SoloProcessTurns)
+                             else _VectorTurns(made, k * VECTOR_SEED_STRIDE))
         calls = {name: max(1, steps // r.num_envs) for name, r in runners.items()}
         done = dict.fromkeys(runners, 0)
         clock = dict.fromkeys(runners, 0.0)

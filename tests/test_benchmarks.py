@@ -118,3 +118,35 @@ def test_bench_ab_refuses_a_missing_interpreter() -> None:
                           timeout=60, check=False)
     assert done.returncode == 2 and "not an executable file" in done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_vector_envs_measured_together_draw_different_tracks(monkeypatch) -> None:
+    """The vector envs of ``bench_env`` share a process (and its generated tracks, with
+    their painted marking maps): each is reset with its own seeds, so none steps on
+    tracks another has painted for it."""
+    import gymnasium as gym
+    import numpy as np
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    import bench_env
+
+    seeds: list[int] = []
+
+    class Recorder:
+        num_envs = 2
+        action_space = gym.spaces.Box(-1.0, 1.0, (2, 1), np.float32)
+
+        def reset(self, *, seed: int) -> None:
+            seeds.append(seed)
+
+        def step(self, actions: np.ndarray) -> tuple:
+            done = np.zeros(self.num_envs, bool)
+            return None, np.zeros(self.num_envs), done, done, {}
+
+        def close(self) -> None:
+            pass
+
+    result = bench_env.interleaved_vector_steps_per_second(
+        {"a": Recorder, "b": Recorder, "c": Recorder}, steps=8, quiet=True)
+    assert set(result) == {"a", "b", "c"}
+    assert seeds == [0, bench_env.VECTOR_SEED_STRIDE, 2 * bench_env.VECTOR_SEED_STRIDE]
