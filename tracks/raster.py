@@ -698,6 +698,16 @@ def untouched_zeros(shape: tuple[int, ...], memory: mmap.mmap | None = None) -> 
     return np.frombuffer(memory, np.uint8, math.prod(shape)).reshape(shape)
 
 
+def paintable_zeros(shape: tuple[int, int]) -> np.ndarray:
+    """``untouched_zeros`` of ``shape`` (rows, cols) seen through one spare column per row:
+    the paint kernels then get the array type they get for a scene's atlas (numba's layout
+    "A", not contiguous) and are compiled once, not once per layout. A map painting into
+    its own memory (one whose scene's atlas went to another scene) otherwise compiled a
+    second set, ≈ 8 s the first time in an install, in the middle of a run."""
+    rows, cols = shape
+    return untouched_zeros((rows, cols + 1))[:, :cols]
+
+
 def memory_of(array: np.ndarray) -> mmap.mmap | None:
     """The anonymous memory under an ``untouched_zeros`` array (None for other arrays,
     e.g. one restored from a pickle)."""
@@ -760,7 +770,7 @@ class TiledMarkingMap:
         self.tile_px = tile_px
         # ``intensity``: paint into this zero array instead (a scene's atlas level 0).
         self._shape = (n_rows, n_cols)
-        self.intensity = untouched_zeros((n_rows, n_cols)) if intensity is None else intensity
+        self.intensity = paintable_zeros((n_rows, n_cols)) if intensity is None else intensity
         self.labels = untouched_zeros((n_rows, n_cols)) if labels else None
         self.filled = np.zeros((-(-n_rows // tile_px), -(-n_cols // tile_px)), np.uint8)
         self._todo = np.zeros_like(self.filled)  # the kernel's tiles to paint: all 0 between calls
@@ -800,7 +810,7 @@ class TiledMarkingMap:
         only when asked for: a retired scene's map is rarely painted again, and a mapping
         costs ~60 µs of a reset in the env)."""
         if self._intensity is None:
-            self._intensity = untouched_zeros(self._shape)
+            self._intensity = paintable_zeros(self._shape)
         return self._intensity
 
     @intensity.setter
@@ -873,6 +883,12 @@ class TiledMarkingMap:
         if "intensity" in state:  # pickled before the lazy intensity
             self._intensity = self.__dict__.pop("intensity")
             self._shape = self._intensity.shape
+        if self._intensity is not None and self._intensity.flags.c_contiguous:
+            # A pickle holds the intensity contiguous: back into the kernels' array type.
+            # Only the painted texels are written: the others stay untouched zero pages.
+            own = paintable_zeros(self._shape)
+            np.copyto(own, self._intensity, where=self._intensity != 0)
+            self._intensity = own
         if "nonzero_rows" not in state:  # pickled before the row masks: every row may
             self.nonzero_rows = np.full(self.filled.size, -1, np.int64)  # hold paint
         if "_record" not in state:

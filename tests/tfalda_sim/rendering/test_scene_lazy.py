@@ -433,6 +433,38 @@ def test_a_scene_sharing_a_retired_scene_s_marking_map_repaints_it(renderer: Ren
             np.testing.assert_array_equal(got, want)
 
 
+def test_a_map_on_its_own_memory_paints_with_the_atlas_s_kernels(renderer: Renderer) -> None:
+    """A marking map paints into a scene's atlas (a strided view), or into its own memory
+    once that scene is retired, or after a pickle: its intensity is the same array type
+    in all three (``paintable_zeros``), so the paint kernels are compiled once (a second
+    set cost ≈ 8 s in the middle of the first run after an install)."""
+    import pickle
+
+    from tfalda_sim.rendering.scene import _store_level0
+    from tfalda_sim.tracks.raster import _paint_listed, _raster_kernel, paintable_zeros
+
+    own = paintable_zeros((5, 7))
+    assert own.shape == (5, 7) and not own.flags.c_contiguous and not own.any()
+    track = replace(generated(23), name="own memory")
+    a = build_scene(track, Effects.off())
+    poses = _poses(track, 3, 23)
+    renderer.render_windows(a, poses[0], ROIS)
+    b = build_scene(track, Effects())  # shares a's map
+    build_scene(generated(3), Effects(), reuse=a)  # a retired: the map on its own memory
+    renderer.render_windows(b, poses[1], ROIS)
+    marking = b.tiles.marking
+    assert not marking.intensity.flags.c_contiguous
+    copy = pickle.loads(pickle.dumps(marking))
+    assert not copy.intensity.flags.c_contiguous
+    np.testing.assert_array_equal(copy.intensity, marking.intensity)
+    copy.fill(np.ones(copy.filled.shape, bool))
+    # Kernels called from Python in this process (others only inside _paint_listed).
+    assert _paint_listed.signatures and _store_level0.signatures
+    for kernel, arg in ((_paint_listed, 5), (_raster_kernel, 0), (_store_level0, 2)):
+        layouts = {str(signature[arg]) for signature in kernel.signatures}
+        assert layouts <= {"array(uint8, 2d, A)"}, (kernel.__name__, layouts)
+
+
 def test_a_fill_that_fails_is_filled_by_the_next_view(renderer: Renderer, monkeypatch) -> None:
     """An error inside a fill (here the worn paint's first use) leaves its tiles unfilled
     and not marked needed: the next view fills them, and equals the eager frame."""
