@@ -24,21 +24,20 @@ def cpu() -> dict[str, str]:
     ``/proc/cpuinfo``; ``platform.processor()`` elsewhere): figures of different sessions
     compare only on the same CPU, and this VM's host has changed between sessions (2.0 GHz
     in the sixth to twelfth, a 2.8 GHz Xeon with AVX-512 in the thirteenth)."""
-    model, flags = platform.processor() or platform.machine(), set()
+    model, flags = "", set()
     try:
         with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
-            for line in f:
-                key, _, value = line.partition(":")
-                key = key.strip()
-                if key in ("model name", "Model", "Hardware") and model == (
-                        platform.processor() or platform.machine()):
-                    model = value.strip()
+            for line in f:  # the first core's lines (x86: "model name"; ARM: "Model")
+                key, _, value = (part.strip() for part in line.partition(":"))
+                if key in ("model name", "Model") and not model:
+                    model = value
                 elif key in ("flags", "Features") and not flags:
                     flags = set(value.split())
     except OSError:
         pass
     simd = next((flag for flag in SIMD_FLAGS if flag in flags), "unknown")
-    return {"cpu": model or "unknown", "simd": simd}
+    return {"cpu": model or platform.processor() or platform.machine() or "unknown",
+            "simd": simd}
 
 
 def machine() -> dict[str, object]:
