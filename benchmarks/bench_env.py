@@ -15,8 +15,14 @@ road every ≈ 50 steps, so a reset's cost counts):
   "lanes" mode on default generated tracks; steps are env steps (N per vector step);
 - the machine's ceiling for them: one single env alone in a process, then one in each of
   2 processes at once (pinned one per core, talking to nobody while they step). Two busy
-  processes share caches, memory bandwidth and, on a VM, the host with its other guests:
-  their ratio is what any 2-env vector env could reach here.
+  processes share caches, memory bandwidth and, on a VM, the host with its other guests.
+  Two figures: their turns' wall clock (a turn lasts until the slower of the two is done:
+  two envs on different tracks step at different paces over a turn, so this ceiling
+  still holds a synchronisation every ``CHUNK_STEPS`` steps), and the sum of each
+  process's own rate over its own stepping time ("each at its own pace": no
+  synchronisation at all, the machine alone). A 2-env vector env synchronises every
+  step: the own-pace ratio is what the machine gives, the difference is what
+  synchronising costs.
 
 Single envs run pinned to one core with OpenCV on one thread (figures per core); the vector
 envs get every core of the machine. A mode's fixed-track and generated-track envs run
@@ -53,7 +59,9 @@ MAKE_VEC_1 = "make_vec, 1 env, lanes, generated"
 MAKE_VEC_2 = "make_vec, 2 envs, lanes, generated"
 CEILING_1 = "1 process alone, lanes, generated"
 CEILING_2 = "2 processes at once, lanes, generated"
+CEILING_2_OWN_PACE = "2 processes at once, each at its own pace"
 SCALING_CEILING = "2 processes at once / 1 (the machine's ceiling)"
+OWN_PACE_CEILING = "2 processes, each at its own pace / 1"
 WARMUP_STEPS = 20  # JIT compilation, caches
 
 
@@ -179,6 +187,8 @@ class _SoloProcessTurns:
     def __init__(self, n: int, cpus: list[int] | None) -> None:
         ctx = multiprocessing.get_context("spawn")
         self.num_envs = n
+        self.own_s = [0.0] * n  # each process's own stepping time [s] …
+        self.own_steps = [0] * n  # … and steps
         self.conns: list[Connection] = []
         self.procs: list[multiprocessing.process.BaseProcess] = []
         try:
@@ -208,8 +218,16 @@ class _SoloProcessTurns:
         t0 = time.perf_counter()
         for conn in self.conns:
             conn.send(calls)
-        episodes = sum(self._answer(w)[1] for w in range(len(self.conns)))
-        return time.perf_counter() - t0, episodes
+        answers = [self._answer(w) for w in range(len(self.conns))]
+        for w, (own_s, _) in enumerate(answers):
+            self.own_s[w] += own_s
+            self.own_steps[w] += calls
+        return time.perf_counter() - t0, sum(episodes for _, episodes in answers)
+
+    def own_pace_steps_per_s(self) -> float:
+        """The sum of each process's steps/s over its own stepping time (not waiting for
+        the slower one at the end of a turn, nor for the messages)."""
+        return sum(n / s for n, s in zip(self.own_steps, self.own_s, strict=True) if s > 0)
 
     def close(self) -> None:
         for conn in self.conns:
@@ -255,9 +273,13 @@ def interleaved_vector_steps_per_second(makes: dict[str, Callable[[], Any]], ste
     finally:
         for runner in runners.values():
             runner.close()
-    return {name: {"steps_per_s": calls[name] * r.num_envs / clock[name],
-                   "ms_per_step": 1000 * clock[name] / (calls[name] * r.num_envs),
-                   "episodes": episodes[name]} for name, r in runners.items()}
+    results = {name: {"steps_per_s": calls[name] * r.num_envs / clock[name],
+                      "ms_per_step": 1000 * clock[name] / (calls[name] * r.num_envs),
+                      "episodes": episodes[name]} for name, r in runners.items()}
+    for name, r in runners.items():
+        if isinstance(r, _SoloProcessTurns):
+            results[name]["own_pace_steps_per_s"] = r.own_pace_steps_per_s()
+    return results
 
 
 def run(steps: int, quiet: bool) -> dict[str, Any]:
@@ -293,6 +315,11 @@ def run(steps: int, quiet: bool) -> dict[str, Any]:
         CEILING_1: lambda: _SoloProcessTurns(1, cpus),
         CEILING_2: lambda: _SoloProcessTurns(2, cpus),
     }, steps, quiet))
+    pair = results.get(CEILING_2)
+    if isinstance(pair, dict):
+        own = pair["own_pace_steps_per_s"]
+        results[CEILING_2_OWN_PACE] = {"steps_per_s": own, "ms_per_step": 1000 / own,
+                                       "episodes": pair["episodes"]}
     reference = results[REFERENCE]
     ref_rate = reference["steps_per_s"] if isinstance(reference, dict) else None
     for r in results.values():
@@ -304,6 +331,10 @@ def run(steps: int, quiet: bool) -> dict[str, Any]:
         a, b = results.get(one), results.get(two)
         if isinstance(a, dict) and isinstance(b, dict):
             scaling[label] = b["steps_per_s"] / a["steps_per_s"]
+    alone = results.get(CEILING_1)
+    if isinstance(alone, dict) and isinstance(pair, dict):  # both at their own pace
+        scaling[OWN_PACE_CEILING] = (pair["own_pace_steps_per_s"]
+                                     / alone["own_pace_steps_per_s"])
     fixed = results.get("lanes, fixed track (oval)")
     generated = results.get("lanes, new generated track per reset")
     if isinstance(fixed, dict) and isinstance(generated, dict):

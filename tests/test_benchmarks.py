@@ -32,10 +32,20 @@ def test_bench_env_reports_every_configuration_against_car_racing() -> None:
     assert {"make_vec, 1 env, lanes, generated", "make_vec, 2 envs, lanes, generated",
             "lanes, fixed track (oval)", "lanes, new generated track per reset",
             "1 process alone, lanes, generated",
-            "2 processes at once, lanes, generated"} <= set(envs)
+            "2 processes at once, lanes, generated",
+            "2 processes at once, each at its own pace"} <= set(envs)
     assert set(result["ratios"]) == {"make_vec 2 envs / 1 env",
                                      "2 processes at once / 1 (the machine's ceiling)",
+                                     "2 processes, each at its own pace / 1",
                                      "generated / fixed track (lanes)"}
+    # A process's own stepping time is part of its turn's wall clock: at their own pace
+    # the two are at least as fast as in turns that wait for the slower one.
+    pair = envs["2 processes at once, lanes, generated"]
+    assert envs["2 processes at once, each at its own pace"]["steps_per_s"] == pytest.approx(
+        pair["own_pace_steps_per_s"])
+    assert pair["own_pace_steps_per_s"] >= pair["steps_per_s"]
+    assert envs["1 process alone, lanes, generated"]["own_pace_steps_per_s"] >= (
+        envs["1 process alone, lanes, generated"]["steps_per_s"])
     # The CPU is named (figures compare only on one CPU; the host changes between runs).
     machine = result["machine"]
     assert machine["cores"] == os.cpu_count() and machine["simd"] != ""
