@@ -345,6 +345,27 @@ def run(steps: int, quiet: bool) -> dict[str, Any]:
     return {"machine": m, "steps": steps, "envs": results, "ratios": scaling}
 
 
+def table(result: dict[str, Any]) -> str:
+    """``run``'s result as the printed table: the machine, then per configuration its
+    steps/s, ms/step, episodes and ratio to CarRacing-v3, then the ratios."""
+    m = result["machine"]
+    lines = [f"machine: {m['cores']} cores of {m['cpu']} ({m['simd']}; single envs pinned "
+             f"to one, OpenCV threads 1), Python {m['python']}"]
+    width = 1 + max(map(len, [*result["envs"], *result["ratios"]]))
+    lines.append(f"{'configuration':<{width}}{'steps/s':>9}{'ms/step':>9}{'episodes':>9}"
+                 f"{'× CarRacing':>13}")
+    for name, r in result["envs"].items():
+        if isinstance(r, str):
+            lines.append(f"{name:<{width}}{r}")
+        else:
+            lines.append(f"{name:<{width}}{r['steps_per_s']:>9.0f}{r['ms_per_step']:>9.3f}"
+                         f"{r['episodes']:>9.0f}"
+                         f"{r.get('ratio_to_car_racing', float('nan')):>12.2f}×")
+    for name, ratio in result["ratios"].items():
+        lines.append(f"{name:<{width}}{ratio:>9.2f}")
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=3000, help="env steps per configuration")
@@ -356,19 +377,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         print(json.dumps(result))
         return 0
-    m = result["machine"]
-    print(f"machine: {m['cores']} cores of {m['cpu']} ({m['simd']}; single envs pinned to "
-          f"one, OpenCV threads 1), Python {m['python']}")
-    print(f"{'configuration':<44}{'steps/s':>9}{'ms/step':>9}{'episodes':>9}"
-          f"{'× CarRacing':>13}")
-    for name, r in result["envs"].items():
-        if isinstance(r, str):
-            print(f"{name:<44}{r}")
-        else:
-            print(f"{name:<44}{r['steps_per_s']:>9.0f}{r['ms_per_step']:>9.3f}"
-                  f"{r['episodes']:>9.0f}{r.get('ratio_to_car_racing', float('nan')):>12.2f}×")
-    for name, ratio in result["ratios"].items():
-        print(f"{name:<44}{ratio:>9.2f}")
+    print(table(result))
     return 0
 
 

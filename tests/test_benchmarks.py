@@ -54,6 +54,28 @@ def test_bench_env_reports_every_configuration_against_car_racing() -> None:
               (cpuinfo.read_text(errors="replace").splitlines() if cpuinfo.exists() else [])
               if line.partition(":")[0].strip() == "model name"]
     assert machine["cpu"] == (models[0] if models else machine["cpu"]) and machine["cpu"]
+    # The printed table (without --json) holds every figure, one row each, the numbers of
+    # every row in the same columns however long its name.
+    sys.path.insert(0, str(BENCHMARKS))
+    try:
+        import bench_env
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+    lines = bench_env.table(result).splitlines()
+    assert machine["cpu"] in lines[0]
+    rows = {line.split("  ", 1)[0]: line for line in lines[2:]}
+    assert set(rows) == set(envs) | set(result["ratios"])
+    name = "2 processes at once, each at its own pace"
+    assert rows[name].split()[-4:] == [f"{envs[name]['steps_per_s']:.0f}",
+                                       f"{envs[name]['ms_per_step']:.3f}",
+                                       f"{envs[name]['episodes']:.0f}",
+                                       f"{envs[name]['ratio_to_car_racing']:.2f}×"]
+    for ratio, value in result["ratios"].items():
+        assert rows[ratio].split()[-1] == f"{value:.2f}"
+    # right-aligned numbers: a ratio row ends where the steps/s column does (31 chars before)
+    ends = {len(line) for line in lines[2:2 + len(envs)]}
+    assert len(ends) == 1 and {len(line) for line in lines[2 + len(envs):]} == {
+        ends.pop() - 31}
 
 
 def test_bench_candidates_finds_the_kernels_identical() -> None:
