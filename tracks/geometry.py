@@ -276,4 +276,12 @@ def extreme_sample_indices(s0: np.ndarray, length: np.ndarray, h0: np.ndarray,
         centre = np.int64(np.rint(marks[q] / delta_m))
         for o in range(7):
             idx[7 * q + o] = min(max(centre + o - 3, 0), n_samples - 1)
-    return np.unique(idx)
+    # np.unique's result, sorted and deduplicated by hand: numba compiles np.unique for
+    # ≈ 2 s of a cold start, the sort alone is shared with other kernels.
+    idx.sort()
+    n = 0
+    for q in range(len(idx)):
+        if n == 0 or idx[q] != idx[n - 1]:
+            idx[n] = idx[q]
+            n += 1
+    return idx[:n]

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from tests.conftest import generated
 from tfalda_sim.tracks import Arc, Gap, Lane, Line, Pose, Straight, Track, generate, load_named
-from tfalda_sim.tracks.geometry import project
+from tfalda_sim.tracks.geometry import extreme_sample_indices, project
 
 segment = st.one_of(
     st.builds(Straight, st.floats(0.05, 6.0)),
@@ -208,6 +208,22 @@ def test_bounds_are_the_extremes_of_the_2_cm_samples(seed: int) -> None:
     want = (pts[:, 0].min() - pad, pts[:, 1].min() - pad,
             pts[:, 0].max() + pad, pts[:, 1].max() + pad)
     assert track.bounds(0.3) == tuple(float(v) for v in want)
+
+
+@pytest.mark.parametrize("seed", [0, 42])
+def test_extreme_sample_indices_are_sorted_unique_and_hold_every_segment_end(seed: int) -> None:
+    """The candidates of ``bounds``: strictly increasing sample indices inside the
+    samples, every segment end's sample and the three on either side among them."""
+    track = generated(seed)
+    t, step = track.table, 0.02
+    n = int(track.length_m / step) + 1
+    idx = extreme_sample_indices(t.s0, t.length, t.h0, t.kappa, step, n)
+    assert idx.dtype == np.int64 and len(idx) > 0
+    assert np.all(np.diff(idx) > 0) and idx[0] >= 0 and idx[-1] < n
+    held = set(idx.tolist())
+    for end in np.concatenate([t.s0, t.s0 + t.length]):
+        c = int(np.rint(end / step))
+        assert {min(max(c + o, 0), n - 1) for o in range(-3, 4)} <= held
 
 
 def test_with_elements_is_replace_keeping_what_the_road_computed() -> None:

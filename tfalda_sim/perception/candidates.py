@@ -325,7 +325,11 @@ def resample_into(crop: np.ndarray, out: np.ndarray) -> None:
     if sh < 1 or sw < 1 or dh < 1 or dw < 1:
         raise ValueError("resample_into: crop and out must be at least 1 × 1 px")
     if sh == dh and sw == dw:
-        out[:, :] = crop
+        # Element by element: an array assigned to a slice makes numba compile its
+        # shape-mismatch message (≈ 6 s of a cold start), for shapes equal here.
+        for r in range(sh):
+            for c in range(sw):
+                out[r, c] = crop[r, c]
         return
     x_first, a0, a1, x_limit = _resize_taps(dw, sw, True)
     y_first, b0s, b1s, _ = _resize_taps(dh, sh, False)

@@ -493,7 +493,8 @@ def _block_bounds(coord_a: np.ndarray, coord_b: np.ndarray, level: np.ndarray,
             for lv in range(levels):
                 if box[i, j, lv, 0] <= box[i, j, lv, 1]:
                     bounds[k, 0] = lv
-                    bounds[k, 1:] = box[i, j, lv]
+                    for q in range(4):  # not a slice assignment: see resample_into
+                        bounds[k, 1 + q] = box[i, j, lv, q]
                     k += 1
     return start, bounds, walls
 
