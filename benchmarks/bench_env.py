@@ -187,8 +187,8 @@ class _SoloProcessTurns:
     def __init__(self, n: int, cpus: list[int] | None) -> None:
         ctx = multiprocessing.get_context("spawn")
         self.num_envs = n
-        self.own_s = [0.0] * n  # each process's own stepping time [s] …
-        self.own_steps = [0] * n  # … and steps
+        self.own_s = [0.0] * n  # each process's own stepping time [s]
+        self.steps_each = 0  # steps each process made (all make the same)
         self.conns: list[Connection] = []
         self.procs: list[multiprocessing.process.BaseProcess] = []
         try:
@@ -221,13 +221,13 @@ class _SoloProcessTurns:
         answers = [self._answer(w) for w in range(len(self.conns))]
         for w, (own_s, _) in enumerate(answers):
             self.own_s[w] += own_s
-            self.own_steps[w] += calls
+        self.steps_each += calls
         return time.perf_counter() - t0, sum(episodes for _, episodes in answers)
 
     def own_pace_steps_per_s(self) -> float:
         """The sum of each process's steps/s over its own stepping time (not waiting for
         the slower one at the end of a turn, nor for the messages)."""
-        return sum(n / s for n, s in zip(self.own_steps, self.own_s, strict=True) if s > 0)
+        return sum(self.steps_each / s for s in self.own_s if s > 0)
 
     def close(self) -> None:
         for conn in self.conns:
