@@ -6,7 +6,8 @@ In one run, with uniformly random actions and resets included (random steering l
 road every ≈ 50 steps, so a reset's cost counts):
 
 - Gymnasium's CarRacing-v3, the reference every other figure is divided by (this VM's
-  speed drifts by 2× within a day; the ratio does not);
+  speed drifts by 2× within a day; the ratio does not), stepped in turns with the single
+  envs (below), so that their ratios to it hold no drift between measurements either;
 - ``gymnasium.make("TfaldaTrack-v0")`` in "lanes" mode (ROIs rendered on demand + TFALDA +
   LIS) and "image" mode (full frame + TFALDA + LIS), on one fixed track (the oval: a reset
   re-uses its scene) and with the default, a new generated track every reset;
@@ -25,9 +26,11 @@ road every ≈ 50 steps, so a reset's cost counts):
   synchronising costs.
 
 Single envs run pinned to one core with OpenCV on one thread (figures per core); the vector
-envs get every core of the machine. A mode's fixed-track and generated-track envs run
-interleaved, in chunks of ``CHUNK_STEPS`` steps each in turn, so that the host's drift
-(± 10 % between runs a minute apart here) does not enter their ratio; so do the vector envs
+envs get every core of the machine. The single envs (both modes, fixed and generated
+tracks) and the reference run interleaved, in rounds of one turn each (``CHUNK_STEPS``
+steps; the reference's ≈ 10× slower steps are fewer per turn, ``REFERENCE_STEPS`` in
+all), so that the host's drift (± 10 % between runs a minute apart here) does not enter
+their ratios; so do the vector envs
 (``make_vec`` with 1 and 2 envs and ``AsyncVectorEnv``), in turns of ≈ ``CHUNK_STEPS`` env
 steps. Needs Box2D for the reference
 (``pip install "gymnasium[box2d]"``, in the ``dev`` extra).
@@ -74,28 +77,43 @@ def steps_per_second(env: gym.Env, steps: int, desc: str, quiet: bool) -> dict[s
 CHUNK_STEPS = 300
 """Steps per turn when single envs run interleaved (``interleaved_steps_per_second``)."""
 
+REFERENCE_STEPS = 2000
+"""CarRacing-v3's steps at most (≈ 10 ms each here), spread over the rounds of the
+single envs' turns."""
+
 
 def interleaved_steps_per_second(makes: dict[str, Callable[[], gym.Env]], steps: int,
-                                 quiet: bool) -> dict[str, dict[str, float]]:
+                                 quiet: bool, totals: dict[str, int] | None = None
+                                 ) -> dict[str, dict[str, float]]:
     """Random-policy steps/s of several envs at once (resets included): each warmed up by
-    ``WARMUP_STEPS`` steps, reset with seed 1, then all stepped in turns of
-    ``CHUNK_STEPS`` steps until each has made ``steps``; an env's time is the sum of its
-    turns."""
-    envs = {name: make() for name, make in makes.items()}
-    clock = dict.fromkeys(envs, 0.0)
-    resets = dict.fromkeys(envs, 0)
+    ``WARMUP_STEPS`` steps, reset with seed 1, then all stepped in rounds, one turn each,
+    until each has made its steps (``steps``, or ``totals[name]``); an env's time is the
+    sum of its turns. There are as many rounds as ``steps`` has turns of ``CHUNK_STEPS``,
+    and an env with other ``totals`` spreads its steps over the same rounds (a slower
+    reference makes fewer steps, in the same minutes as the others: the host's drift
+    stays out of their ratios)."""
+    totals = {name: (totals or {}).get(name, steps) for name in makes}
+    if any(n < 1 for n in totals.values()):
+        raise ValueError(f"every env needs at least one step, got {totals}")
+    rounds = -(-steps // CHUNK_STEPS)
+    turn = {name: -(-n // rounds) for name, n in totals.items()}
+    envs: dict[str, gym.Env] = {}
+    clock = dict.fromkeys(makes, 0.0)
+    resets = dict.fromkeys(makes, 0)
+    done = dict.fromkeys(makes, 0)
     try:
-        for env in envs.values():
+        for name, make in makes.items():
+            envs[name] = env = make()
             env.action_space.seed(0)
             env.reset(seed=0)
             for _ in range(WARMUP_STEPS):
                 env.step(env.action_space.sample())
             env.reset(seed=1)
-        with tqdm(total=steps * len(envs), desc=" + ".join(envs), disable=quiet,
+        with tqdm(total=sum(totals.values()), desc=" + ".join(envs), disable=quiet,
                   file=sys.stderr) as bar:
-            for start in range(0, steps, CHUNK_STEPS):
-                n = min(CHUNK_STEPS, steps - start)
+            while any(done[name] < totals[name] for name in envs):
                 for name, env in envs.items():
+                    n = min(turn[name], totals[name] - done[name])
                     t0 = time.perf_counter()
                     for _ in range(n):
                         _, _, terminated, truncated, _ = env.step(env.action_space.sample())
@@ -103,11 +121,13 @@ def interleaved_steps_per_second(makes: dict[str, Callable[[], gym.Env]], steps:
                             env.reset()
                             resets[name] += 1
                     clock[name] += time.perf_counter() - t0
+                    done[name] += n
                     bar.update(n)
     finally:
         for env in envs.values():
             env.close()
-    return {name: {"steps_per_s": steps / clock[name], "ms_per_step": 1000 * clock[name] / steps,
+    return {name: {"steps_per_s": totals[name] / clock[name],
+                   "ms_per_step": 1000 * clock[name] / totals[name],
                    "episodes": resets[name] + 1} for name in envs}
 
 
@@ -293,17 +313,24 @@ def run(steps: int, quiet: bool) -> dict[str, Any]:
 
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")  # CarRacing draws with pygame
     one_core()
+    singles: dict[str, Callable[[], gym.Env]] = {REFERENCE: lambda: gym.make("CarRacing-v3")}
+    for mode in ("lanes", "image"):
+        singles[f"{mode}, fixed track (oval)"] = (
+            lambda mode=mode: gym.make("TfaldaTrack-v0", observation=mode, track="oval"))
+        singles[f"{mode}, new generated track per reset"] = (
+            lambda mode=mode: gym.make("TfaldaTrack-v0", observation=mode))
+    # The reference steps in the same rounds as the envs divided by it (≈ 10× slower a
+    # step: fewer steps, the same minutes).
+    reference_steps = min(steps, REFERENCE_STEPS)
     try:
-        results[REFERENCE] = steps_per_second(gym.make("CarRacing-v3"), min(steps, 2000),
-                                              REFERENCE, quiet)
+        gym.make("CarRacing-v3").close()
     except Exception as exc:  # the reference may be missing: say so in the table
         results[REFERENCE] = f"not available: {type(exc).__name__}: {exc}"
-    for mode in ("lanes", "image"):
-        results.update(interleaved_steps_per_second({
-            f"{mode}, fixed track (oval)":
-                lambda mode=mode: gym.make("TfaldaTrack-v0", observation=mode, track="oval"),
-            f"{mode}, new generated track per reset":
-                lambda mode=mode: gym.make("TfaldaTrack-v0", observation=mode)}, steps, quiet))
+        del singles[REFERENCE]
+    results.update(interleaved_steps_per_second(singles, steps, quiet,
+                                                {REFERENCE: reference_steps}))
+    results = {REFERENCE: results[REFERENCE],
+               **{k: v for k, v in results.items() if k != REFERENCE}}
     if all_cpus is not None:  # the vector envs get the whole machine
         os.sched_setaffinity(0, all_cpus)
     cpus = sorted(all_cpus) if all_cpus is not None else None

@@ -3,6 +3,7 @@ speed is measured by the scripts, never by tests)."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import subprocess
@@ -182,3 +183,49 @@ def test_vector_envs_measured_together_draw_different_tracks(monkeypatch) -> Non
         {"a": Recorder, "b": Recorder, "c": Recorder}, steps=8, quiet=True)
     assert set(result) == {"a", "b", "c"}
     assert seeds == [0, bench_env.VECTOR_SEED_STRIDE, 2 * bench_env.VECTOR_SEED_STRIDE]
+
+
+def test_single_envs_and_the_reference_step_in_the_same_rounds(monkeypatch) -> None:
+    """``bench_env`` steps the reference in turns with the envs divided by it: every
+    round gives each env one turn, a slower reference spreads its fewer steps over the
+    same rounds (the host's drift stays out of the ratios), each makes exactly its
+    steps, and a total of no steps is refused."""
+    import gymnasium as gym
+    import numpy as np
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    import bench_env
+
+    log: list[str] = []
+
+    def recorder(name: str) -> type:
+        class Recorder:
+            action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+
+            def reset(self, *, seed: int | None = None) -> None:
+                pass
+
+            def step(self, action: np.ndarray) -> tuple:
+                log.append(name)
+                return None, 0.0, False, False, {}
+
+            def close(self) -> None:
+                pass
+        return Recorder
+
+    assert bench_env.CHUNK_STEPS == 300  # the turns below
+    steps = 4 * bench_env.CHUNK_STEPS  # four rounds
+    result = bench_env.interleaved_steps_per_second(
+        {"ref": recorder("ref"), "env": recorder("env")}, steps, quiet=True,
+        totals={"ref": 10})
+    warm = bench_env.WARMUP_STEPS
+    timed = log[2 * warm:]
+    assert timed.count("ref") == 10 and timed.count("env") == steps
+    # turns in rounds: ref, env, ref, env, … — the reference's 10 steps in four turns
+    turns = [(name, len(list(run))) for name, run in itertools.groupby(timed)]
+    assert turns == [("ref", 3), ("env", 300), ("ref", 3), ("env", 300), ("ref", 3),
+                     ("env", 300), ("ref", 1), ("env", 300)]
+    assert {r["episodes"] for r in result.values()} == {1}
+    with pytest.raises(ValueError, match="at least one step"):
+        bench_env.interleaved_steps_per_second({"ref": recorder("ref")}, steps, quiet=True,
+                                               totals={"ref": 0})
