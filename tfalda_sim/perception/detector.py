@@ -23,8 +23,9 @@ from .candidates import (
     segment_steps,
     sobel_horizontal_edges,
 )
+from .fused import LEFT_CURVE, RIGHT_CURVE, STRAIGHT, FusedParams, detect_frame, fused_params
 from .lis import LaneInferenceSystem, LisResult, Rows
-from .params import DetectorConfig, EdgeMode, RoiLayout
+from .params import DetectorConfig, EdgeMode, RoiLayout, TfaldaConfig
 from .rois import (
     LaneChangeState,
     Roi,
@@ -82,6 +83,27 @@ class LaneObservation:
         return len(self.widths)
 
 
+_FUSED_STATES = {STRAIGHT: StateKind.STRAIGHT, LEFT_CURVE: StateKind.LEFT_CURVE,
+                 RIGHT_CURVE: StateKind.RIGHT_CURVE}
+
+_SEGMENTS: dict[tuple[tuple[int, ...], float], tuple[np.ndarray, np.ndarray]] = {}
+"""``_segments_for``'s tables by crop shape and resample factor (the ROIs' few heights
+and widths; bounded)."""
+
+
+def _segments_for(shape: tuple[int, ...], config: TfaldaConfig
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """``segment_steps`` of a crop of ``shape`` resampled by ``config``, looked up (per
+    ROI and frame: the shape's resampling and the table's key cost µs)."""
+    key = (shape, config.resample_factor)
+    found = _SEGMENTS.get(key)
+    if found is None:
+        if len(_SEGMENTS) >= 256:
+            _SEGMENTS.clear()
+        found = _SEGMENTS[key] = segment_steps(*resample_shape(*shape, config))
+    return found
+
+
 def check_frame(frame: object, width: int, height: int) -> np.ndarray:
     """``frame`` if it is a (height, width) uint8 array, else a ValueError/TypeError that
     names what was given and how to fix it."""
@@ -102,10 +124,15 @@ def check_frame(frame: object, width: int, height: int) -> np.ndarray:
 
 class TfaldaDetector:
     """TFALDA + LIS on a frame sequence. ``config`` selects each stage
-    (``DetectorConfig.thesis()``, ``.without_lis()``, ``.improved()``)."""
+    (``DetectorConfig.thesis()``, ``.without_lis()``, ``.improved()``).
 
-    def __init__(self, config: DetectorConfig | None = None) -> None:
+    ``fused``: frames after a first frame go through one numba call (``fused``) where it
+    applies (no forced state, no lane change); False keeps every frame on the Python
+    path, the reference it equals."""
+
+    def __init__(self, config: DetectorConfig | None = None, *, fused: bool = True) -> None:
         self.config = config or DetectorConfig.thesis()
+        self.fused = fused
         self.lis = LaneInferenceSystem(self.config.lis, self.config.layout.rows)
         self._lambda_scale = row_lambda_scales(self.config.layout)
         self._initial_rois: tuple[RoiLayout, tuple[tuple[Roi, Roi], ...]] | None = None
@@ -180,6 +207,10 @@ class TfaldaDetector:
         return self._process(crops)
 
     def _process(self, crops: list[np.ndarray]) -> LaneObservation:
+        if (self._previous is not None and self._fresh_side is None and self._forced is None
+                and not isinstance(self._state, LaneChangeState)
+                and getattr(self, "fused", True)):  # unpickled from before it: fused
+            return self._process_fused(crops)
         cfg = self.config
         first = self._previous is None
         rois_used = self._rois
@@ -247,6 +278,74 @@ class TfaldaDetector:
             self._previous = final
         object.__setattr__(obs, "next_rois", self._windows()[1].copy())
         return obs
+
+    def _process_fused(self, crops: list[np.ndarray]) -> LaneObservation:
+        """``_process`` of a frame after a first frame in one numba call
+        (``fused.detect_frame``; no forced state, no lane change, no side searched
+        afresh): the same results, the same state after it."""
+        rois_array = self._windows()[1]
+        tcfg = self.config.tfalda
+        params = self._fused_params(rois_array)
+        previous = self._previous_table()
+        lis = self.lis
+        final, marks, widths, fault_count, reset, state, placed = detect_frame(
+            tuple(crops), tuple([_segments_for(c.shape, tcfg) for c in crops]),
+            rois_array, previous, lis.widths, lis.fault_count, params.flags, params.reals,
+            params.layout, params.rows)
+        lis.widths = widths
+        lis.fault_count = fault_count
+        rows = final.tolist()
+        obs = LaneObservation(
+            frame=self._frames,
+            rois=rois_array.copy(),
+            lanes=final[:, :4].copy(),
+            d=final[:, 4].copy(),
+            intensity=final[:, 5].copy(),
+            lam=final[:, 6].copy(),
+            replaced=marks[:, 0].copy(),
+            corrected=marks[:, 1].copy(),
+            widths=widths.copy(),
+            fault_count=fault_count,
+            roi_reset=reset,
+            state=self._state.kind if state < 0 else _FUSED_STATES[state],
+            first_frame=False,
+            next_rois=rois_array,  # replaced below
+        )
+        self._frames += 1
+        if reset:
+            self.reset()
+        else:
+            lanes = [LaneSegment(r[0], r[4], r[5], r[1], r[3], r[6]) for r in rows]
+            self._previous = [(lanes[k], lanes[k + 1]) for k in range(0, len(lanes), 2)]
+            self._previous_of = (self._previous, final)
+            if placed is not rois_array:
+                wins = [tuple(w) for w in placed.tolist()]
+                rois = [Roi(*w) for w in wins]
+                self._rois = [(rois[k], rois[k + 1]) for k in range(0, len(rois), 2)]
+                self._windows_of = (self._rois, wins, placed)
+        object.__setattr__(obs, "next_rois", self._windows()[1].copy())
+        return obs
+
+    def _previous_table(self) -> np.ndarray:
+        """The last frame's final lanes as ``fused.detect_frame`` reads them (n, 7): the
+        table of the last fused frame, else made from the lanes."""
+        kept = getattr(self, "_previous_of", None)
+        if kept is not None and kept[0] is self._previous:
+            return kept[1]
+        assert self._previous is not None
+        table = np.array([(ln.p, ln.y_top, ln.p + ln.d, ln.y_bottom, ln.d, ln.i, ln.lam)
+                          for pair in self._previous for ln in pair], dtype=np.float64)
+        self._previous_of = (self._previous, table)
+        return table
+
+    def _fused_params(self, rois_array: np.ndarray) -> FusedParams:
+        """``fused_params`` of this detector's configuration and ROI rows, made once."""
+        kept = getattr(self, "_fused_of", None)
+        rows = tuple(map(tuple, rois_array[::2, 1::2].tolist()))  # (y, height) per row
+        if kept is None or kept[0] is not self.config or kept[1] != rows:
+            kept = self._fused_of = (self.config, rows, fused_params(
+                self.config, self.lis, rows, self._lambda_scale))
+        return kept[2]
 
     def _find(self, crop: np.ndarray, roi: Roi, prev: LaneSegment | None,
               lambda_scale: float) -> LaneSegment:

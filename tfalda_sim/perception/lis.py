@@ -133,7 +133,7 @@ class LaneInferenceSystem:
                         else measured)
             ok = True
             if cfg.min_max:  # ``width_limits`` at both edges
-                lo0, lo1, hi0, hi1 = self._limits_at(left.y_top, left.y_bottom)
+                lo0, lo1, hi0, hi1 = self.limits_at(left.y_top, left.y_bottom)
                 ok = lo0 <= measured[0] <= hi0 and lo1 <= measured[1] <= hi1
             if ok and cfg.width_change:
                 seen = filtered if cfg.width_check is WidthCheck.FILTERED else measured
@@ -156,7 +156,7 @@ class LaneInferenceSystem:
         return LisResult(out, replaced, corrected, new_widths.copy(), self.fault_count,
                          roi_reset_due)
 
-    def _limits_at(self, y_top: float, y_bottom: float) -> tuple[float, float, float, float]:
+    def limits_at(self, y_top: float, y_bottom: float) -> tuple[float, float, float, float]:
         """``width_limits`` (min, min, max, max) at a row's top and bottom edge [px]: np.interp
         of the table, remembered per row (the ROI rows keep their heights, and two
         interpolations per row and frame cost more than the rest of the check)."""
