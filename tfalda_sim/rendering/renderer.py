@@ -571,7 +571,7 @@ class _Stack:
     tex_rows: int
     zero_len: int
     out_len: int
-    window_offsets: list[int]
+    views: list[tuple[int, int, tuple[int, int]]]  # per window: its slice of ``out``, shape
     level_bounds: np.ndarray  # (n, 5): level and car-frame box of the ground hits per block
     wall_rows: tuple[float, float]  # range of wall texture rows read (inf, −inf: none)
 
@@ -884,8 +884,7 @@ class Renderer:
             (ox0, oy0), ids, shades = drawn
             _paint_obstacles(*pieces, ids, shades, ox0, oy0, px.flags, gain, self._noise,
                              noise_offset, width, params)
-        return [out[o:o + ww * wh].reshape(wh, ww)
-                for o, (_, _, ww, wh) in zip(st.window_offsets, boxes, strict=True)]
+        return [out[a:b].reshape(shape) for a, b, shape in st.views]
 
     def _check_windows(self, windows: list[tuple[int, int, int, int]]
                        ) -> tuple[tuple[int, int, int, int], ...]:
@@ -895,7 +894,7 @@ class Renderer:
         for win in windows:
             if len(win) != 4:
                 raise ValueError(f"window {win} must be (x, y, width, height) [px]")
-            wx0, wy0, ww, wh = (int(v) for v in win)
+            wx0, wy0, ww, wh = map(int, win)
             if ww <= 0 or wh <= 0 or wx0 < 0 or wy0 < 0 or wx0 + ww > width or (
                     wy0 + wh > height):
                 raise ValueError(f"window {win} is not inside the {width}×{height} image")
@@ -913,10 +912,10 @@ class Renderer:
             np.array(boxes, np.int64), px.cuts, px.seg_reads, px.seg_code, px.seg_flags,
             _PACK, px.block_start, px.block_bounds, px.block_walls, FOOTPRINT_BLOCK_PX,
             px.block_cols)
-        window_offsets = []
+        views = []
         out_len = zero_len = 0
         for _, _, ww, wh in boxes:
-            window_offsets.append(out_len)
+            views.append((out_len, out_len + ww * wh, (wh, ww)))
             out_len += ww * wh
             zero_len = max(zero_len, ww)
         stack = _Stack(rows=pieces[0], cols=pieces[1], widths=pieces[2],
@@ -924,7 +923,7 @@ class Renderer:
                        s_rows=s_pieces[0],
                        s_cols=s_pieces[1], s_widths=s_pieces[2], s_offsets=s_pieces[3],
                        s_codes=s_pieces[4], tex_rows=tex_rows, zero_len=zero_len,
-                       out_len=out_len, window_offsets=window_offsets,
+                       out_len=out_len, views=views,
                        level_bounds=level_bounds, wall_rows=(wall_lo, wall_hi))
         if len(self._stacks) >= 32:  # the ROIs move every frame: few packings come back
             self._stacks.clear()  # (popping the oldest of a dict of tuples costs µs)
