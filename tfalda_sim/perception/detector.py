@@ -131,6 +131,8 @@ class TfaldaDetector:
     path, the reference it equals."""
 
     def __init__(self, config: DetectorConfig | None = None, *, fused: bool = True) -> None:
+        if not isinstance(fused, bool):
+            raise TypeError(f"fused must be True or False, got {fused!r}")
         self.config = config or DetectorConfig.thesis()
         self.fused = fused
         self.lis = LaneInferenceSystem(self.config.lis, self.config.layout.rows)

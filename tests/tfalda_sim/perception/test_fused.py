@@ -56,14 +56,16 @@ def weaving_poses(track, n: int, seed: int) -> list[tuple[float, float, float]]:
 
 
 @pytest.mark.parametrize("camera", ["thesis", "reference-car"])
-@pytest.mark.parametrize("preset", ["thesis", "improved", "without_lis"])
+@pytest.mark.parametrize("preset", ["thesis", "improved", "without_lis", "improved-3-rows"])
 def test_fused_frames_equal_the_python_path(monkeypatch: pytest.MonkeyPatch, camera: str,
                                             preset: str) -> None:
     """Frames rendered on demand through the ROIs (crops of one buffer) and whole frames
     (crops that are views of a frame), with blackouts that reset the ROIs."""
     cam = load_camera(camera)
     renderer = Renderer(cam)
-    config = getattr(DetectorConfig, preset)().on_camera(cam)
+    config = (DetectorConfig.improved(rows=3) if preset == "improved-3-rows"
+              else getattr(DetectorConfig, preset)()).on_camera(cam)
+    assert config.layout.rows == (3 if preset == "improved-3-rows" else 2)
     track = generate(3)
     scene = build_scene(track, Effects(), np.random.default_rng(0))
     spy = Spy(monkeypatch)
@@ -88,7 +90,7 @@ def test_fused_frames_equal_the_python_path(monkeypatch: pytest.MonkeyPatch, cam
     # the LIS's paths ran: rejected rows (or held lanes, improved) and, in the thesis'
     # configuration, resets
     assert (replaced > 0) == (preset != "without_lis")
-    if preset != "improved":  # (its gap hold rides out blackouts, or not)
+    if preset in ("thesis", "without_lis"):  # (the gap hold rides out blackouts, or not)
         assert (resets > 0) == (preset == "thesis")
 
 
@@ -133,6 +135,11 @@ def test_a_pickled_detector_goes_on_the_same() -> None:
         a = det.process(frame)
         assert_same(a, copy.process(frame), k)
         assert_same(a, old.process(frame), k)
+
+
+def test_fused_must_be_a_bool() -> None:
+    with pytest.raises(TypeError, match="fused must be True or False"):
+        TfaldaDetector(fused="no")  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("value", [-3.5, -2.5, -1.5, -0.5, 0.5, 1.5, 2.5, 3.5, 0.49999999999999994,
