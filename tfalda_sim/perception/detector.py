@@ -256,23 +256,12 @@ class TfaldaDetector:
             for r, row_replaced in enumerate(result.replaced):
                 if row_replaced:
                     replaced[2 * r:2 * r + 2] = True
-        obs = LaneObservation(
-            frame=self._frames,
-            rois=rois_array.copy(),
-            lanes=table[:, :4].copy(),
-            d=table[:, 4].copy(),
-            intensity=table[:, 5].copy(),
-            lam=table[:, 6].copy(),
-            replaced=replaced,
-            corrected=(np.array([c for pair in result.corrected for c in pair], dtype=bool)
-                       if result is not None else np.zeros(2 * len(final), dtype=bool)),
-            widths=np.asarray(widths, dtype=np.float64),
-            fault_count=self.lis.fault_count,
-            roi_reset=reset,
-            state=state_kind,
-            first_frame=first,
-            next_rois=np.empty((0, 4), np.int32),  # filled below
-        )
+        obs = self._observation(
+            rois_array, table, replaced,
+            (np.array([c for pair in result.corrected for c in pair], dtype=bool)
+             if result is not None else np.zeros(2 * len(final), dtype=bool)),
+            np.asarray(widths, dtype=np.float64), self.lis.fault_count, reset, state_kind,
+            first)
         self._frames += 1
         if reset:
             self.reset()
@@ -297,22 +286,9 @@ class TfaldaDetector:
         lis.widths = widths
         lis.fault_count = fault_count
         rows = final.tolist()
-        obs = LaneObservation(
-            frame=self._frames,
-            rois=rois_array.copy(),
-            lanes=final[:, :4].copy(),
-            d=final[:, 4].copy(),
-            intensity=final[:, 5].copy(),
-            lam=final[:, 6].copy(),
-            replaced=marks[:, 0].copy(),
-            corrected=marks[:, 1].copy(),
-            widths=widths.copy(),
-            fault_count=fault_count,
-            roi_reset=reset,
-            state=self._state.kind if state < 0 else _FUSED_STATES[state],
-            first_frame=False,
-            next_rois=rois_array,  # replaced below
-        )
+        obs = self._observation(
+            rois_array, final, marks[:, 0].copy(), marks[:, 1].copy(), widths.copy(),
+            fault_count, reset, self._state.kind if state < 0 else _FUSED_STATES[state], False)
         self._frames += 1
         if reset:
             self.reset()
@@ -327,6 +303,18 @@ class TfaldaDetector:
                 self._windows_of = (self._rois, wins, placed)
         object.__setattr__(obs, "next_rois", self._windows()[1].copy())
         return obs
+
+    def _observation(self, rois: np.ndarray, table: np.ndarray, replaced: np.ndarray,
+                     corrected: np.ndarray, widths: np.ndarray, fault_count: int, reset: bool,
+                     state: StateKind, first: bool) -> LaneObservation:
+        """The frame's observation from its lanes' ``table`` (n, 7) (``x_top, y_top,
+        x_bottom, y_bottom, d, i, λ``); ``next_rois`` is set once the ROIs are placed."""
+        return LaneObservation(
+            frame=self._frames, rois=rois.copy(), lanes=table[:, :4].copy(),
+            d=table[:, 4].copy(), intensity=table[:, 5].copy(), lam=table[:, 6].copy(),
+            replaced=replaced, corrected=corrected, widths=widths, fault_count=fault_count,
+            roi_reset=reset, state=state, first_frame=first,
+            next_rois=np.empty((0, 4), np.int32))
 
     def _previous_table(self) -> np.ndarray:
         """The last frame's final lanes as ``fused.detect_frame`` reads them (n, 7): the
