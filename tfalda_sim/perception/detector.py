@@ -13,7 +13,9 @@ Works on any 8-bit grayscale sequence: ``process(frame)`` takes whole frames,
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -104,6 +106,44 @@ def _segments_for(shape: tuple[int, ...], config: TfaldaConfig
     return found
 
 
+def _lane_of(row: list[float]) -> LaneSegment:
+    """The lane of a row of ``fused.detect_frame``'s table."""
+    return LaneSegment(row[0], row[4], row[5], row[1], row[3], row[6])
+
+
+class _Pairs(Sequence[tuple[Any, Any]]):
+    """(left, right) per ROI row, made from the rows of ``table`` (two per ROI row) by
+    ``make`` when first asked for: the fused path hands the next frame its inputs as
+    arrays; the objects are made only for the Python path (≈ 11 µs a frame otherwise)."""
+
+    __slots__ = ("_make", "_pairs", "table")
+
+    def __init__(self, table: np.ndarray, make: Callable[[Any], Any]) -> None:
+        self.table = table
+        self._make = make
+        self._pairs: list[tuple[Any, Any]] | None = None
+
+    def _made(self) -> list[tuple[Any, Any]]:
+        if self._pairs is None:
+            items = [self._make(row) for row in self.table.tolist()]
+            self._pairs = [(items[k], items[k + 1]) for k in range(0, len(items), 2)]
+        return self._pairs
+
+    def __getitem__(self, index):  # type: ignore[no-untyped-def,override]
+        return self._made()[index]
+
+    def __iter__(self) -> Iterator[tuple[Any, Any]]:
+        return iter(self._made())
+
+    def __len__(self) -> int:
+        return len(self.table) // 2
+
+
+def _roi_of(row: list[int]) -> Roi:
+    """The ROI of a row ``(x, y, width, height)`` [px] of ``fused.detect_frame``'s."""
+    return Roi(row[0], row[1], row[2], row[3])
+
+
 def check_frame(frame: object, width: int, height: int) -> np.ndarray:
     """``frame`` if it is a (height, width) uint8 array, else a ValueError/TypeError that
     names what was given and how to fix it."""
@@ -151,8 +191,9 @@ class TfaldaDetector:
         kept = getattr(self, "_initial_rois", None)  # unpickled from before it: None
         if kept is None or kept[0] is not layout:
             kept = self._initial_rois = (layout, tuple(initial_rois(layout)))
-        self._rois: list[tuple[Roi, Roi]] = list(kept[1])
-        self._previous: Rows | None = None  # last frame's final lanes
+        self._rois: Sequence[tuple[Roi, Roi]] = list(kept[1])
+        self._previous: Sequence[tuple[LaneSegment, LaneSegment]] | None = None  # last
+        # frame's final lanes (a _Pairs after a fused frame)
         self._fresh_side: list[list[bool]] | None = None  # lane change: sides to re-find
         self._state = state_of(self._forced) if self._forced else StraightState()
         self.lis.reset()
@@ -285,7 +326,6 @@ class TfaldaDetector:
             params.layout, params.rows)
         lis.widths = widths
         lis.fault_count = fault_count
-        rows = final.tolist()
         obs = self._observation(
             rois_array, final, marks[:, 0].copy(), marks[:, 1].copy(), widths.copy(),
             fault_count, reset, self._state.kind if state < 0 else _FUSED_STATES[state], False)
@@ -293,14 +333,10 @@ class TfaldaDetector:
         if reset:
             self.reset()
         else:
-            lanes = [LaneSegment(r[0], r[4], r[5], r[1], r[3], r[6]) for r in rows]
-            self._previous = [(lanes[k], lanes[k + 1]) for k in range(0, len(lanes), 2)]
-            self._previous_of = (self._previous, final)
+            self._previous = _Pairs(final, _lane_of)
             if placed is not rois_array:
-                wins = [tuple(w) for w in placed.tolist()]
-                rois = [Roi(*w) for w in wins]
-                self._rois = [(rois[k], rois[k + 1]) for k in range(0, len(rois), 2)]
-                self._windows_of = (self._rois, wins, placed)
+                self._rois = _Pairs(placed, _roi_of)
+                self._windows_of = (self._rois, [tuple(w) for w in placed.tolist()], placed)
         object.__setattr__(obs, "next_rois", self._windows()[1].copy())
         return obs
 
@@ -319,13 +355,16 @@ class TfaldaDetector:
     def _previous_table(self) -> np.ndarray:
         """The last frame's final lanes as ``fused.detect_frame`` reads them (n, 7): the
         table of the last fused frame, else made from the lanes."""
+        previous = self._previous
+        if isinstance(previous, _Pairs):
+            return previous.table
         kept = getattr(self, "_previous_of", None)
-        if kept is not None and kept[0] is self._previous:
+        if kept is not None and kept[0] is previous:
             return kept[1]
-        assert self._previous is not None
+        assert previous is not None
         table = np.array([(ln.p, ln.y_top, ln.p + ln.d, ln.y_bottom, ln.d, ln.i, ln.lam)
-                          for pair in self._previous for ln in pair], dtype=np.float64)
-        self._previous_of = (self._previous, table)
+                          for pair in previous for ln in pair], dtype=np.float64)
+        self._previous_of = (previous, table)
         return table
 
     def _fused_params(self, rois_array: np.ndarray) -> FusedParams:

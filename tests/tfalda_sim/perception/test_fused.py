@@ -12,6 +12,8 @@ import pytest
 from tfalda_sim.camera import load_camera
 from tfalda_sim.perception import DetectorConfig, StateKind, TfaldaDetector
 from tfalda_sim.perception.fused import _round
+from tfalda_sim.perception.rois import Roi
+from tfalda_sim.perception.segment import LaneSegment
 from tfalda_sim.rendering import Effects, Renderer, build_scene
 from tfalda_sim.tracks import generate, load_named
 
@@ -130,7 +132,10 @@ def test_a_pickled_detector_goes_on_the_same() -> None:
     copy = pickle.loads(pickle.dumps(det))
     old = pickle.loads(pickle.dumps(det))
     for name in ("fused", "_previous_of", "_fused_of"):
-        del old.__dict__[name]
+        old.__dict__.pop(name, None)
+    old._previous = [tuple(pair) for pair in old._previous]  # lists of objects, as then
+    old._rois = [tuple(pair) for pair in old._rois]
+    assert isinstance(copy._previous[0][0], LaneSegment) and isinstance(copy._rois[1][0], Roi)
     for k, frame in enumerate(frames[12:]):
         a = det.process(frame)
         assert_same(a, copy.process(frame), k)
