@@ -36,6 +36,7 @@ from .rois import (
     classify,
     follow,
     initial_rois,
+    row_geometry,
     row_lambda_scales,
     state_of,
     windows,
@@ -137,6 +138,13 @@ class _Pairs(Sequence[tuple[Any, Any]]):
 
     def __len__(self) -> int:
         return len(self.table) // 2
+
+
+def _lane_table(rows: Sequence[tuple[LaneSegment, LaneSegment]]) -> np.ndarray:
+    """The lanes of ``rows`` as one table (n, 7): ``x_top, y_top, x_bottom, y_bottom, d,
+    i, λ`` per lane (``LaneObservation``'s arrays, ``fused.detect_frame``'s rows)."""
+    return np.array([(ln.p, ln.y_top, ln.p + ln.d, ln.y_bottom, ln.d, ln.i, ln.lam)
+                     for pair in rows for ln in pair], dtype=np.float64).reshape(-1, 7)
 
 
 def _roi_of(row: list[int]) -> Roi:
@@ -290,8 +298,7 @@ class TfaldaDetector:
             state_kind = self._place(base, final, first)
         # One table of the lanes' numbers (one array made, not four): x_top, y_top,
         # x_bottom, y_bottom, d, i, λ per lane.
-        table = np.array([(ln.p, ln.y_top, ln.p + ln.d, ln.y_bottom, ln.d, ln.i, ln.lam)
-                          for pair in final for ln in pair], dtype=np.float64).reshape(-1, 7)
+        table = _lane_table(final)
         replaced = held
         if result is not None:
             for r, row_replaced in enumerate(result.replaced):
@@ -317,7 +324,7 @@ class TfaldaDetector:
         afresh): the same results, the same state after it."""
         rois_array = self._windows()[1]
         tcfg = self.config.tfalda
-        params = self._fused_params(rois_array)
+        params = self._fused_params()
         previous = self._previous_table()
         lis = self.lis
         final, marks, widths, fault_count, reset, state, placed = detect_frame(
@@ -362,19 +369,18 @@ class TfaldaDetector:
         if kept is not None and kept[0] is previous:
             return kept[1]
         assert previous is not None
-        table = np.array([(ln.p, ln.y_top, ln.p + ln.d, ln.y_bottom, ln.d, ln.i, ln.lam)
-                          for pair in previous for ln in pair], dtype=np.float64)
+        table = _lane_table(previous)
         self._previous_of = (previous, table)
         return table
 
-    def _fused_params(self, rois_array: np.ndarray) -> FusedParams:
-        """``fused_params`` of this detector's configuration and ROI rows, made once."""
+    def _fused_params(self) -> FusedParams:
+        """``fused_params`` of this detector's configuration, made once (the ROI rows keep
+        the layout's heights, ``row_geometry``: ROIs move sideways only)."""
         kept = getattr(self, "_fused_of", None)
-        rows = tuple(map(tuple, rois_array[::2, 1::2].tolist()))  # (y, height) per row
-        if kept is None or kept[0] is not self.config or kept[1] != rows:
-            kept = self._fused_of = (self.config, rows, fused_params(
-                self.config, self.lis, rows, self._lambda_scale))
-        return kept[2]
+        if kept is None or kept[0] is not self.config:
+            kept = self._fused_of = (self.config, fused_params(
+                self.config, self.lis, row_geometry(self.config.layout), self._lambda_scale))
+        return kept[1]
 
     def _find(self, crop: np.ndarray, roi: Roi, prev: LaneSegment | None,
               lambda_scale: float) -> LaneSegment:
