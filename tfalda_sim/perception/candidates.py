@@ -72,16 +72,18 @@ holds ≈ width²/2 samples of 8 bytes: 33 MB for a 2000 px wide image)."""
 
 
 def _make_block_sums(blocks: int):  # type: ignore[no-untyped-def]  # numba's intrinsic
-    """An intrinsic ``(flat, steps, first, n, width, sign, base, out)``: for ``blocks``
-    blocks of ``SIMD_BLOCK`` starts from ``base``, the sums over ``n`` samples of one
-    segment of the pixels at ``flat[base + block·SIMD_BLOCK + y·width + sign·x + lane]``,
-    ``(y, x)`` the samples' rows and column offsets ``steps[first:first + n]``, written to
-    ``out[block·SIMD_BLOCK + lane]``. The sums stay in vector registers over all samples
-    (numba's loops kept them in memory: a load, add and store per lane and sample). No
-    bounds checks: ``search_candidates`` checks its arrays before."""
+    """An intrinsic ``(flat, steps, first, n, width, sign, base, out, at)``: for
+    ``blocks`` blocks of ``SIMD_BLOCK`` starts from ``base``, the sums over ``n`` samples
+    of one segment of the pixels at ``flat[base + block·SIMD_BLOCK + y·width + sign·x +
+    lane]``, ``(y, x)`` the samples' rows and column offsets ``steps[first:first + n]``,
+    written to ``out[at + block·SIMD_BLOCK + lane]``. The sums stay in vector registers
+    over all samples (numba's loops kept them in memory: a load, add and store per lane
+    and sample). No bounds checks: ``search_candidates`` checks its arrays before. (An
+    offset, not a slice ``out[at:]``: a slice takes and drops a reference to ``out``, two
+    atomic operations per call, and the search makes ≈ 2 × width calls per ROI.)"""
 
     @intrinsic
-    def block_sums(typingctx, flat, steps, first, n, width, sign, base, out
+    def block_sums(typingctx, flat, steps, first, n, width, sign, base, out, at
                    ):  # type: ignore[no-untyped-def]
         # Contiguous arrays of the shapes search_candidates checks, a writable out: the
         # loads and stores step through raw memory.
@@ -98,6 +100,7 @@ def _make_block_sums(blocks: int):  # type: ignore[no-untyped-def]  # numba's in
             table = context.make_array(signature.args[1])(context, builder, args[1]).data
             dest = context.make_array(signature.args[7])(context, builder, args[7]).data
             first_, n_, width_, sign_, base_ = args[2:7]
+            out_at = args[8]
             vector = ir.VectorType(context.get_data_type(signature.args[0].dtype), SIMD_BLOCK)
             align = signature.args[0].dtype.bitwidth // 8
             intp = base_.type
@@ -115,12 +118,13 @@ def _make_block_sums(blocks: int):  # type: ignore[no-untyped-def]  # numba's in
                     value = builder.load(builder.bitcast(ptr, vector.as_pointer()), align=align)
                     builder.store(builder.add(builder.load(acc), value), acc)
             for b, acc in enumerate(accs):
-                ptr = builder.gep(dest, [ir.Constant(intp, b * SIMD_BLOCK)])
+                ptr = builder.gep(dest, [builder.add(out_at,
+                                                     ir.Constant(intp, b * SIMD_BLOCK))])
                 builder.store(builder.load(acc), builder.bitcast(ptr, vector.as_pointer()),
                               align=align)
             return context.get_dummy_value()
 
-        return types.void(flat, steps, ip, ip, ip, ip, ip, out), codegen
+        return types.void(flat, steps, ip, ip, ip, ip, ip, out, ip), codegen
 
     return block_sums
 
@@ -229,14 +233,14 @@ def search_candidates(flat: np.ndarray, height: int, width: int,
         left = (m + block - 1) // block
         while left > 0:  # up to 3 blocks (96 starts) at once: the thesis' ROIs in one go
             if left >= 3:
-                _block_sums_3(flat, steps, at, n, w, sign, lo + done, sums[done:])
+                _block_sums_3(flat, steps, at, n, w, sign, lo + done, sums, done)
                 done += 3 * block
                 left -= 3
             elif left == 2:
-                _block_sums_2(flat, steps, at, n, w, sign, lo + done, sums[done:])
+                _block_sums_2(flat, steps, at, n, w, sign, lo + done, sums, done)
                 left = 0
             else:
-                _block_sums_1(flat, steps, at, n, w, sign, lo + done, sums[done:])
+                _block_sums_1(flat, steps, at, n, w, sign, lo + done, sums, done)
                 left = 0
         for k in range(m):  # branch-free update: vectorises
             x = lo + k
