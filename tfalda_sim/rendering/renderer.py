@@ -218,20 +218,25 @@ def _light_maps(light_x: np.ndarray, light_y: np.ndarray, rows: np.ndarray, cols
                 widths: np.ndarray, offsets: np.ndarray, coord_a: np.ndarray,
                 coord_b: np.ndarray, affine: np.ndarray, size_x: float, size_y: float,
                 light_scale: float) -> None:
-    """Light-map coordinates of the pieces' ground hits, packed as in ``_atlas_maps``
-    (level-0 texel coordinates scaled by ``light_scale``, texel centres at integers)."""
+    """Light-map coordinates of the pieces' ground hits, packed as in ``_sample_atlas``
+    (level-0 texel coordinates scaled by ``light_scale``, texel centres at integers); the
+    maps read and written at unsigned offsets, not sliced per piece (see ``_bilinear``)."""
     a00, a01, a02, a10, a11, a12, lo, hx, hy = _texel_transform(affine, size_x, size_y)
     ls = np.float32(light_scale)
     half = np.float32(0.5)
+    u = np.uint64
+    image_width = coord_a.shape[1]
+    ca = coord_a.reshape(-1)  # C-contiguous maps: views, made once a call
+    cb = coord_b.reshape(-1)
     end = 0
     for t in range(len(rows)):
-        ar = coord_a[rows[t], cols[t]:cols[t] + widths[t]]
-        br = coord_b[rows[t], cols[t]:cols[t] + widths[t]]
-        lx = light_x[offsets[t]:offsets[t] + widths[t]]
-        ly = light_y[offsets[t]:offsets[t] + widths[t]]
-        for j in range(widths[t]):
-            lx[j] = min(max(a00 * ar[j] + a01 * br[j] + a02, lo), hx) * ls - half
-            ly[j] = min(max(a10 * ar[j] + a11 * br[j] + a12, lo), hy) * ls - half
+        p = u(rows[t] * image_width + cols[t])
+        o = u(offsets[t])
+        for j in range(u(widths[t])):
+            light_x[o + j] = min(max(a00 * ca[p + j] + a01 * cb[p + j] + a02, lo), hx) * ls \
+                - half
+            light_y[o + j] = min(max(a10 * ca[p + j] + a11 * cb[p + j] + a12, lo), hy) * ls \
+                - half
         end = max(end, offsets[t] + widths[t])
     _pad_tail(light_x, light_y, end)
 
