@@ -103,20 +103,18 @@ def _taps_at_border(flat: np.ndarray, h: int, w: int, ix: int, iy: int) -> tuple
 
 
 @njit(cache=True, error_model="numpy", inline="always")  # called per row piece
-def _bilinear(out: np.ndarray, start: np.uint64, flat: np.ndarray, h: np.int32, w: np.int32,
-              mx: np.ndarray, my: np.ndarray, n: np.uint64, frac_x: np.ndarray,
-              frac_y: np.ndarray, at: np.ndarray, top: np.ndarray, bottom: np.ndarray,
-              top8: np.ndarray, bottom8: np.ndarray) -> None:
-    """``out[start + j]`` = the ``h`` × ``w`` image ``flat`` (uint8, row-major) at ``(mx[j],
-    my[j])`` [texels, centres at integers] for ``j < n``, bilinear, taps outside reading 0:
-    what ``cv2.remap(INTER_LINEAR, BORDER_CONSTANT, 0)`` of OpenCV 5 (5.0, 5.1) computes for
-    a uint8 image and float maps (float32 weights, fused multiply-adds, rounded half to
-    even), the renderer's sampler before (``tests`` compare the two). Three loops, so that
-    the arithmetic ones vectorise and only the loads (two 16-bit pairs per sample) stay
-    scalar: scratch of at least ``n`` float32 ``frac_x``, ``frac_y``, int32 ``at``, uint16
-    ``top``, ``bottom``, and ``top8``, ``bottom8`` the last two's bytes (views made once
-    per call, as the offsets instead of slices: each view or slice made per piece takes
-    and drops a reference to its array, two atomic operations)."""
+def _bilinear(out: np.ndarray, flat: np.ndarray, h: np.int32, w: np.int32, mx: np.ndarray,
+              my: np.ndarray, frac_x: np.ndarray, frac_y: np.ndarray, at: np.ndarray,
+              top: np.ndarray, bottom: np.ndarray) -> None:
+    """``out[j]`` = the ``h`` × ``w`` image ``flat`` (uint8, row-major) at ``(mx[j],
+    my[j])`` [texels, centres at integers], bilinear, taps outside reading 0: what
+    ``cv2.remap(INTER_LINEAR, BORDER_CONSTANT, 0)`` of OpenCV 5 (5.0, 5.1) computes for a uint8
+    image and float maps (float32 weights, fused multiply-adds, rounded half to even),
+    the renderer's sampler before (``tests`` compare the two). Three loops, so that the
+    arithmetic ones vectorise and only the loads (two 16-bit pairs per sample) stay
+    scalar: scratch of at least ``len(mx)`` float32 ``frac_x``, ``frac_y``, int32 ``at``,
+    uint16 ``top``, ``bottom``."""
+    n = len(mx)
     last_x = np.float32(w - 1)  # exact: the atlas has < 2^24 texels a side
     last_y = np.float32(h - 1)
     for j in range(n):
@@ -135,16 +133,17 @@ def _bilinear(out: np.ndarray, start: np.uint64, flat: np.ndarray, h: np.int32, 
             top[j], bottom[j] = _taps_at_border(flat, h, w, int(math.floor(mx[j])),
                                                 int(math.floor(my[j])))
     magic = np.float32(1 << 23)  # x + 2^23 − 2^23 rounds 0 ≤ x < 2^22 half to even
-    for i in range(int(n)):  # per sample its taps' bytes, left and right (a signed index:
-        j = np.uint64(i)  # the interleaved byte loads vectorise only so)
-        p00 = np.float32(top8[2 * i])
-        p01 = np.float32(top8[2 * i + 1])
-        p10 = np.float32(bottom8[2 * i])
-        p11 = np.float32(bottom8[2 * i + 1])
+    top8 = top.view(np.uint8)  # per sample its taps' bytes: left, right
+    bottom8 = bottom.view(np.uint8)
+    for j in range(n):
+        p00 = np.float32(top8[2 * j])
+        p01 = np.float32(top8[2 * j + 1])
+        p10 = np.float32(bottom8[2 * j])
+        p11 = np.float32(bottom8[2 * j + 1])
         v0 = _fma32(frac_x[j], p01 - p00, p00)
         v1 = _fma32(frac_x[j], p11 - p10, p10)
         v = _fma32(frac_y[j], v1 - v0, v0)  # in [0, 255]
-        out[start + j] = np.uint8(np.int32((v + magic) - magic))
+        out[j] = np.uint8(np.int32((v + magic) - magic))
 
 
 @njit(cache=True, error_model="numpy")
@@ -157,8 +156,7 @@ def _sample_atlas(tex: np.ndarray, atlas: np.ndarray, rows: np.ndarray, cols: np
     packed back to back: piece t is image row ``rows[t]``, columns ``cols[t]`` … +
     ``widths[t]``, written to the flat ``tex`` from ``offsets[t]`` on. A piece's atlas
     coordinates (pixel centres at integers) go to a small scratch first, in a loop that
-    vectorises; sampling reads it while it is in cache. The per-pixel maps are read as
-    flat arrays at unsigned offsets, not sliced per piece (see ``_bilinear``).
+    vectorises; sampling reads it while it is in cache.
 
     Every pixel of a piece has the same code ``codes[t]`` (the pieces are cut where it
     changes): a mip level on the ground, ``levels`` on the walls, ``levels + 1`` for the
@@ -175,42 +173,39 @@ def _sample_atlas(tex: np.ndarray, atlas: np.ndarray, rows: np.ndarray, cols: np
     wrap = np.float32(wall_cols)
     h32, w32 = np.int32(atlas.shape[0]), np.int32(atlas.shape[1])  # < 2^31 texels
     flat = atlas.reshape(-1)
-    u = np.uint64
-    image_width = coord_a.shape[1]
-    ca = coord_a.reshape(-1)  # C-contiguous maps: views, made once a call
-    cb = coord_b.reshape(-1)
-    wr = wall_row.reshape(-1)
-    n = image_width  # the widest piece: scratch for one piece at a time
+    n = coord_a.shape[1]  # the widest piece: scratch for one piece at a time
     mx, my = np.empty(n, np.float32), np.empty(n, np.float32)
     frac_x, frac_y = np.empty(n, np.float32), np.empty(n, np.float32)
     at, top, bottom = np.empty(n, np.int32), np.empty(n, np.uint16), np.empty(n, np.uint16)
-    top8, bottom8 = top.view(np.uint8), bottom.view(np.uint8)
     for t in range(len(rows)):
-        width = u(widths[t])
-        p = u(rows[t] * image_width + cols[t])  # the piece's first pixel in the maps
+        r = rows[t]
+        c0 = cols[t]
+        width = widths[t]
         code = codes[t]
         scale = piece_table[code, 0]
         bx = piece_table[code, 1]
         by = piece_table[code, 2]
+        ar = coord_a[r, c0:c0 + width]
         if code < levels:
+            br = coord_b[r, c0:c0 + width]
             for j in range(width):
                 # Level-0 texel coordinates, clamped into the level's zero guard band.
-                x = min(max(a00 * ca[p + j] + a01 * cb[p + j] + a02, lo), hx)
-                y = min(max(a10 * ca[p + j] + a11 * cb[p + j] + a12, lo), hy)
+                x = min(max(a00 * ar[j] + a01 * br[j] + a02, lo), hx)
+                y = min(max(a10 * ar[j] + a11 * br[j] + a12, lo), hy)
                 mx[j] = x * scale + bx
                 my[j] = y * scale + by
         else:
             for j in range(width):
-                w = ca[p + j] + shift  # both in [0, wrap): one subtraction wraps it
+                w = ar[j] + shift  # both in [0, wrap): one subtraction wraps it
                 mx[j] = w - wrap * np.float32(w >= wrap) + bx
             if code == levels:
                 for j in range(width):
-                    my[j] = np.float32(wr[p + j] + wall_y)
+                    my[j] = np.float32(wall_row[r, c0 + j] + wall_y)
             else:
                 for j in range(width):
-                    my[j] = cb[p + j]
-        _bilinear(tex, u(offsets[t]), flat, h32, w32, mx, my, width, frac_x, frac_y, at,
-                  top, bottom, top8, bottom8)
+                    my[j] = coord_b[r, c0 + j]
+        _bilinear(tex[offsets[t]:offsets[t] + width], flat, h32, w32, mx[:width], my[:width],
+                  frac_x, frac_y, at, top, bottom)
 
 
 @njit(cache=True, error_model="numpy")
@@ -218,25 +213,20 @@ def _light_maps(light_x: np.ndarray, light_y: np.ndarray, rows: np.ndarray, cols
                 widths: np.ndarray, offsets: np.ndarray, coord_a: np.ndarray,
                 coord_b: np.ndarray, affine: np.ndarray, size_x: float, size_y: float,
                 light_scale: float) -> None:
-    """Light-map coordinates of the pieces' ground hits, packed as in ``_sample_atlas``
-    (level-0 texel coordinates scaled by ``light_scale``, texel centres at integers); the
-    maps read and written at unsigned offsets, not sliced per piece (see ``_bilinear``)."""
+    """Light-map coordinates of the pieces' ground hits, packed as in ``_atlas_maps``
+    (level-0 texel coordinates scaled by ``light_scale``, texel centres at integers)."""
     a00, a01, a02, a10, a11, a12, lo, hx, hy = _texel_transform(affine, size_x, size_y)
     ls = np.float32(light_scale)
     half = np.float32(0.5)
-    u = np.uint64
-    image_width = coord_a.shape[1]
-    ca = coord_a.reshape(-1)  # C-contiguous maps: views, made once a call
-    cb = coord_b.reshape(-1)
     end = 0
     for t in range(len(rows)):
-        p = u(rows[t] * image_width + cols[t])
-        o = u(offsets[t])
-        for j in range(u(widths[t])):
-            light_x[o + j] = min(max(a00 * ca[p + j] + a01 * cb[p + j] + a02, lo), hx) * ls \
-                - half
-            light_y[o + j] = min(max(a10 * ca[p + j] + a11 * cb[p + j] + a12, lo), hy) * ls \
-                - half
+        ar = coord_a[rows[t], cols[t]:cols[t] + widths[t]]
+        br = coord_b[rows[t], cols[t]:cols[t] + widths[t]]
+        lx = light_x[offsets[t]:offsets[t] + widths[t]]
+        ly = light_y[offsets[t]:offsets[t] + widths[t]]
+        for j in range(widths[t]):
+            lx[j] = min(max(a00 * ar[j] + a01 * br[j] + a02, lo), hx) * ls - half
+            ly[j] = min(max(a10 * ar[j] + a11 * br[j] + a12, lo), hy) * ls - half
         end = max(end, offsets[t] + widths[t])
     _pad_tail(light_x, light_y, end)
 
