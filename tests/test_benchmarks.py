@@ -229,3 +229,31 @@ def test_single_envs_and_the_reference_step_in_the_same_rounds(monkeypatch) -> N
     with pytest.raises(ValueError, match="at least one step"):
         bench_env.interleaved_steps_per_second({"ref": recorder("ref")}, steps, quiet=True,
                                                totals={"ref": 0})
+
+
+def test_bench_kernel_ab_swaps_a_revisions_kernels_into_env_steps() -> None:
+    result = run_json("bench_kernel_ab.py", "--rev", "HEAD", "--module",
+                      "tfalda_sim.rendering.renderer", "--kernels", "_combine,_sample_atlas",
+                      "--rounds", "3", "--turn-steps", "20")
+    assert result["kernels"] == ["_combine", "_sample_atlas"]
+    assert result["rounds"] == 3 and result["turn_steps"] == 20
+    assert result["before_us_per_step"] > 0 and result["after_us_per_step"] > 0
+    q1, q3 = result["ratio_quartiles"]
+    assert 0 < q1 <= result["ratio_after_to_before"] <= q3
+    assert result["machine"]["cores"] >= 1 and result["machine"]["pinned_to_one_core"]
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (("--rev", "no-such-revision", "--module", "tfalda_sim.rendering.renderer",
+      "--kernels", "_combine"), "give a commit"),
+    (("--rev", "HEAD", "--module", "tfalda_sim.rendering.renderer", "--kernels", "_nope"),
+     "has no function _nope"),
+    (("--rev", "HEAD", "--module", "tfalda_sim.no_such_module", "--kernels", "_combine"),
+     "unknown module"),
+])
+def test_bench_kernel_ab_names_bad_arguments(args: tuple[str, ...], message: str) -> None:
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_kernel_ab.py"), *args,
+                           "--rounds", "1"], capture_output=True, text=True, timeout=300,
+                          check=False)
+    assert done.returncode == 2
+    assert message in done.stderr and "Traceback" not in done.stderr
