@@ -14,8 +14,10 @@ per-round ratio of step times (after / before), with both versions' median µs p
 
 Both versions are compiled here from source (``cache=False``), the revision's from
 ``git show REV:path`` of this checkout, run as a module of the same package (its relative
-imports get today's modules). Its outputs are not compared: the tests and
-``tools/fingerprint.py`` hold those.
+imports get today's modules). Only kernels that Python code calls are swapped: one that
+another kernel calls was compiled into that caller (``find_lane_in_crop`` into
+``fused.detect_frame``) and keeps its version there. Outputs are not compared: the tests
+and ``tools/fingerprint.py`` hold those.
 
     python benchmarks/bench_kernel_ab.py --rev 31fe65d --module tfalda_sim.rendering.renderer \\
         --kernels _combine [--track oval|gen] [--observation lanes|image] [--rounds 60] [--json]
