@@ -109,8 +109,11 @@ def run(rev: str, module: str, names: list[str], track: str, observation: str, r
                        module)
     kwargs: dict[str, Any] = {"observation": observation}
     if track != "gen":
-        kwargs["track"] = track
-    env = gym.make("TfaldaTrack-v0", **kwargs)
+        kwargs["track"] = int(track) if track.isdigit() else track  # a seed, or a name
+    try:
+        env = gym.make("TfaldaTrack-v0", **kwargs)
+    except ValueError as e:  # the env names the problem and the accepted values
+        raise AbError(f"--track {track!r}: {e}") from e
     env.reset(seed=0)
     actions = np.random.default_rng(0).uniform(-1.0, 1.0, (1 << 16, 1)).astype(np.float32)
     k = 0
@@ -178,7 +181,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--kernels", required=True,
                         help="comma-separated function names of that module")
     parser.add_argument("--track", default="oval",
-                        help="a named track, or 'gen' for a new generated track per reset")
+                        help="a named track, a generator seed, or 'gen' for a new generated "
+                             "track per reset")
     parser.add_argument("--observation", default="lanes", choices=("lanes", "image"))
     parser.add_argument("--rounds", type=int, default=60, help="rounds of two turns")
     parser.add_argument("--turn-steps", type=int, default=TURN_STEPS, help="steps per turn")

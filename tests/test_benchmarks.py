@@ -250,6 +250,8 @@ def test_bench_kernel_ab_swaps_a_revisions_kernels_into_env_steps() -> None:
      "has no function _nope"),
     (("--rev", "HEAD", "--module", "tfalda_sim.no_such_module", "--kernels", "_combine"),
      "unknown module"),
+    (("--rev", "HEAD", "--module", "tfalda_sim.rendering.renderer", "--kernels", "_combine",
+      "--track", "no-such-track"), "unknown track"),
 ])
 def test_bench_kernel_ab_names_bad_arguments(args: tuple[str, ...], message: str) -> None:
     done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_kernel_ab.py"), *args,
