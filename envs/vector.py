@@ -12,9 +12,10 @@ worker and step, not per env; a parent that only waited would leave its core idl
 2-env batch ran at 0.95–1.0× one env). OpenCV runs single-threaded in the workers (the
 parallelism is the processes'), observations travel through shared memory, the waits
 poll briefly before they block (``WAIT_SPIN_S``), and the parent merges the infos as
-flat columns. On x86 the steps themselves go through shared memory too (``_Board``:
-actions, autoreset flags, rewards, flags and the infos' numbers, handed over by a step
-number each side polls): a pipe message cost ≈ 15 µs of system calls and wake-up here,
+flat columns, its own envs' while it waits for the workers (``_MergeAhead``). On x86
+the steps themselves go through shared memory too (``_Board``: actions, autoreset flags,
+rewards, flags and the infos' numbers, handed over by a step number each side polls): a
+pipe message cost ≈ 15 µs of system calls and wake-up here,
 four per step and worker; the pipes carry everything else (resets, calls, errors, infos
 the board cannot hold). Everything else is Gymnasium's semantics: ``AutoresetMode.NEXT_STEP`` (or
 ``SAME_STEP``, as SB3 needs), seeds ``seed + i`` for env ``i``, the infos of
@@ -242,12 +243,15 @@ class TfaldaTrackVectorEnv(VectorEnv):
             raise RuntimeError(f"{name} in a worker of the vector env: {message}\n{trace}")
         raise _ERRORS[name](message)
 
-    def _step_posted(self, acts: np.ndarray, same_step: bool
-                     ) -> list[tuple[float, bool, bool, dict[str, Any]]]:
+    def _step_posted(self, acts: np.ndarray, same_step: bool, merge: bool
+                     ) -> tuple[list[tuple[float, bool, bool, dict[str, Any]]],
+                                dict[str, Any] | None]:
         """A step through the board: the workers' actions and autoreset flags are
         written, then the step's number (the workers poll it), this process steps its own
         envs meanwhile and reads the workers' results from the board (or, for an info the
-        board cannot hold, from the pipe)."""
+        board cannot hold, from the pipe). With ``merge``, this process's envs' infos are
+        merged before it waits for the workers (``_MergeAhead``): the merged infos, or
+        None where the workers' infos have another layout."""
         board = self._board
         assert board is not None
         n0 = int(self._slices[1])
@@ -268,6 +272,9 @@ class TfaldaTrackVectorEnv(VectorEnv):
             answers = _step_envs(self._local, self.single_observation_space,
                                  self._observations, 0, acts[:n0], self._autoreset[:n0],
                                  same_step)
+            ahead = _MergeAhead.of(answers[0][3], self.num_envs) if merge else None
+            if ahead is not None and not all(ahead.fill(i, a[3]) for i, a in enumerate(answers)):
+                ahead = None
             if _others_reset(self._autoreset, 0, n0):
                 _prepare_resets(self._local)
         except BaseException:
@@ -276,7 +283,10 @@ class TfaldaTrackVectorEnv(VectorEnv):
             raise
         for part in self._collect():
             answers.extend(part)
-        return answers
+        if ahead is not None and not all(ahead.fill(i, answers[i][3])
+                                         for i in range(n0, self.num_envs)):
+            ahead = None
+        return answers, None if ahead is None else ahead.merged
 
     def _collect(self) -> list[list[tuple[float, bool, bool, dict[str, Any]]]]:
         """The results of the step last posted of every worker not heard yet (all of
@@ -368,8 +378,9 @@ class TfaldaTrackVectorEnv(VectorEnv):
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
                                           dict[str, Any]]:
-        obs, rewards, terminated, truncated, infos = self.step_per_env(actions)
-        return obs, rewards, terminated, truncated, _merge_infos(infos)
+        obs, rewards, terminated, truncated, infos, merged = self._step(actions, merge=True)
+        return (obs, rewards, terminated, truncated,
+                merged if merged is not None else _merge_infos(infos))
 
     def step_per_env(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray,
                                                   list[dict[str, Any]]]:
@@ -378,6 +389,13 @@ class TfaldaTrackVectorEnv(VectorEnv):
         merging the infos only to split them again (≈ 85 µs a step here, in the process
         that steps the first env and so sets the pace). The same dicts ``step`` merges;
         those of this process's envs are the envs' own: copy one before changing it."""
+        return self._step(actions, merge=False)[:5]
+
+    def _step(self, actions: Any, merge: bool
+              ) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, list[dict[str, Any]],
+                         dict[str, Any] | None]:
+        """``step_per_env``, and with ``merge`` the merged infos where they could be
+        merged while the workers stepped (``_MergeAhead``; else None)."""
         self._check_open()
         acts = np.asarray(actions)
         if acts.shape[:1] != (self.num_envs,):
@@ -387,19 +405,20 @@ class TfaldaTrackVectorEnv(VectorEnv):
         same_step = self.autoreset_mode is AutoresetMode.SAME_STEP
         if self._board is not None and acts.dtype.kind == "f" and (
                 acts.shape == self.action_space.shape):
-            results = self._step_posted(acts, same_step)
+            results, merged = self._step_posted(acts, same_step, merge)
         else:  # no board, or actions the envs will refuse (with their own message)
             results = self._run(
                 "step", [(a, r, same_step) for a, r in zip(
                     self._per_lane(acts), self._per_lane(self._autoreset), strict=True)],
                 lambda data: _step_envs(self._local, space, buffer, 0, *data))
+            merged = None
         rewards = np.array([r[0] for r in results], dtype=np.float64)
         terminated = np.array([r[1] for r in results], dtype=np.bool_)
         truncated = np.array([r[2] for r in results], dtype=np.bool_)
         if not same_step:
             self._autoreset = terminated | truncated
         return (_copy(self._observations), rewards, terminated, truncated,
-                [r[3] for r in results])
+                [r[3] for r in results], merged)
 
     def call(self, name: str, *args: Any, **kwargs: Any) -> tuple[Any, ...]:
         """``getattr(env, name)(*args, **kwargs)`` on every env (or the attribute's value if
@@ -596,47 +615,84 @@ where the fast path does not apply."""
 
 def _merge_scalars(infos: list[dict[str, Any]]) -> dict[str, Any] | None:
     """``_merge_infos`` of infos with the same keys, each a plain float, int, bool or str
-    of the same type in every info (every step of ours): one array per numeric type, a
-    row per key (each row as ``np.array(values, dtype=type)`` makes it; the rows are views
-    of that array), an object array per string key; None for any other infos. The dict
-    is made in one call from the rows in key order (per key two stores cost µs a step)."""
-    first = infos[0]
-    kinds = tuple(map(type, first.values()))
-    keys = tuple(first)
-    for info in infos[1:]:
-        if tuple(info) != keys or tuple(map(type, info.values())) != kinds:
-            return None
-    plan = _plans.get(key := (keys, kinds))
-    if plan is None:
-        plan = False
-        if all(k in _SCALARS or k is str for k in kinds):
-            columns = tuple([j for j, k in enumerate(kinds) if k is kind] for kind in _SCALARS)
-            numeric = [j for cols in columns for j in cols]  # the blocks' rows, in order
-            row_of = [numeric.index(j) if k is not str else -1 for j, k in enumerate(kinds)]
-            names = tuple(name for k in keys for name in (k, f"_{k}"))
-            strings = tuple(j for j, k in enumerate(kinds) if k is str)
-            plan = (names, columns, row_of, strings)
-        if len(_plans) > 16:
-            _plans.clear()
-        _plans[key] = plan
-    if plan is False:
+    of the same type in every info (every step of ours; ``_MergeAhead``), None for any
+    other infos."""
+    ahead = _MergeAhead.of(infos[0], len(infos))
+    if ahead is None:
         return None
-    names, columns, row_of, strings = plan
-    rows = [list(info.values()) for info in infos]
-    n = len(rows)
-    block_rows: list[Any] = []
-    for kind, cols in zip(_SCALARS, columns, strict=True):
-        if cols:  # iterating a 2-D array gives its rows (views)
-            block_rows.extend(np.array([row[j] for j in cols for row in rows],
-                                       dtype=kind).reshape(len(cols), n))
-    values: list[Any] = [None] * len(names)
-    values[0::2] = [block_rows[i] for i in row_of]  # a string's row −1: replaced below
-    values[1::2] = np.ones((len(keys), n), np.bool_)
-    for j in strings:  # as the general path: an object column
-        column = np.full(n, fill_value=None, dtype=object)
-        column[:] = [row[j] for row in rows]
-        values[2 * j] = column
-    return dict(zip(names, values, strict=True))
+    for i, info in enumerate(infos):
+        if not ahead.fill(i, info):
+            return None
+    return ahead.merged
+
+
+class _MergeAhead:
+    """``_merge_infos``' result for infos of one layout, made before the infos are all
+    known: ``of`` makes the merged dict with its arrays, ``fill`` writes env ``i``'s values
+    into them. So the vector env merges this process's envs' infos while it waits for the
+    workers, and only theirs after (≈ 45 µs a step off the path both lanes wait on).
+
+    The layout (a plan per keys and their types): one array per numeric type, a row per
+    key (each row as ``np.array(values, dtype=type)`` makes it; the rows are views of that
+    array), an object array per string key; the dict is made in one call from the rows in
+    key order (per key two stores cost µs a step)."""
+
+    __slots__ = ("blocks", "keys", "kinds", "merged", "plan", "strings")
+
+    def __init__(self, keys: tuple, kinds: tuple, plan: tuple, n: int) -> None:
+        names, columns, row_of, strings = plan
+        self.keys, self.kinds, self.plan = keys, kinds, plan
+        self.blocks = [np.empty((len(cols), n), dtype=kind)
+                       for kind, cols in zip(_SCALARS, columns, strict=True)]
+        block_rows: list[Any] = [row for block in self.blocks for row in block]  # views
+        values: list[Any] = [None] * len(names)
+        values[0::2] = [block_rows[i] for i in row_of]  # a string's row −1: replaced below
+        values[1::2] = np.ones((len(keys), n), np.bool_)
+        self.strings = []
+        for j in strings:  # as the general path: an object column
+            column = np.full(n, fill_value=None, dtype=object)
+            values[2 * j] = column
+            self.strings.append((j, column))
+        self.merged = dict(zip(names, values, strict=True))
+
+    @classmethod
+    def of(cls, first: dict[str, Any], n: int) -> _MergeAhead | None:
+        """The merge of ``n`` infos of ``first``'s layout, None if it has other values
+        than plain scalars and strings."""
+        kinds = tuple(map(type, first.values()))
+        keys = tuple(first)
+        plan = _plans.get(key := (keys, kinds))
+        if plan is None:
+            plan = False
+            if all(k in _SCALARS or k is str for k in kinds):
+                columns = tuple([j for j, k in enumerate(kinds) if k is kind]
+                                for kind in _SCALARS)
+                numeric = [j for cols in columns for j in cols]  # the blocks' rows, in order
+                row_of = [numeric.index(j) if k is not str else -1
+                          for j, k in enumerate(kinds)]
+                names = tuple(name for k in keys for name in (k, f"_{k}"))
+                strings = tuple(j for j, k in enumerate(kinds) if k is str)
+                plan = (names, columns, row_of, strings)
+            if len(_plans) > 16:
+                _plans.clear()
+            _plans[key] = plan
+        return None if plan is False else cls(keys, kinds, plan, n)
+
+    def fill(self, i: int, info: dict[str, Any]) -> bool:
+        """Env ``i``'s ``info`` into the arrays; False (the merge is void) if its layout
+        is not the merge's or an int does not fit int64."""
+        if tuple(info) != self.keys or tuple(map(type, info.values())) != self.kinds:
+            return False
+        row = list(info.values())
+        for block, cols in zip(self.blocks, self.plan[1], strict=True):
+            if cols:
+                try:
+                    block[:, i] = [row[j] for j in cols]
+                except OverflowError:  # an int beyond int64: the general path says so
+                    return False
+        for j, column in self.strings:
+            column[i] = row[j]
+        return True
 
 
 def _merge_infos(infos: list[dict[str, Any]]) -> dict[str, Any]:

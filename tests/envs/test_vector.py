@@ -114,6 +114,44 @@ def test_step_per_env_gives_the_infos_step_merges(mode: AutoresetMode) -> None:
         ended += sum("final_info" in info for info in infos)
     assert (ended > 0) == (mode is AutoresetMode.SAME_STEP)
 
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_step_merges_this_process_infos_while_the_worker_steps(
+        mode: AutoresetMode, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``step`` merges the infos ahead (``_MergeAhead``: this process's env's while the
+    worker steps) whenever every env's info has the same layout, and falls back to
+    ``_merge_infos`` only for the steps where it does not (SAME_STEP: an ended episode's
+    info carries ``final_obs`` and ``final_info``); the rollouts equal SyncVectorEnv's
+    either way (``test_rollouts_equal_sync_vector_env``)."""
+    import tfalda_sim.envs.vector as vector
+
+    fallbacks: list[list[dict[str, Any]]] = []
+    merge = vector._merge_infos
+
+    def counted(infos: list[dict[str, Any]]) -> dict[str, Any]:
+        fallbacks.append(infos)
+        return merge(infos)
+
+    monkeypatch.setattr(vector, "_merge_infos", counted)
+    venv = TfaldaTrackVectorEnv(2, workers=2, autoreset_mode=mode)
+    venv.reset(seed=3)
+    rng = np.random.default_rng(3)
+    fell_back, ended = [], []  # the steps merged after the fact; those an episode ended in
+    for k in range(80):
+        calls = len(fallbacks)
+        action = rng.uniform(-0.2, 1.0, venv.action_space.shape).astype(np.float32)
+        _, _, terminated, truncated, info = venv.step(action)
+        assert set(info) >= {"cross_track_m", "_cross_track_m", "track", "_track"}
+        if len(fallbacks) > calls:
+            fell_back.append(k)
+        if np.any(terminated | truncated):
+            ended.append(k)
+    venv.close()
+    assert ended
+    # NEXT_STEP: a reset's info has a step's layout; SAME_STEP: exactly the steps whose
+    # ended episode put final_obs and final_info into its env's info.
+    assert fell_back == ([] if mode is AutoresetMode.NEXT_STEP else ended)
+
+
 def test_same_seed_same_rollout_and_another_seed_differs() -> None:
     a = rollout(gym.make_vec("TfaldaTrack-v0", num_envs=2), seed=11, steps=30)
     b = rollout(gym.make_vec("TfaldaTrack-v0", num_envs=2), seed=11, steps=30)
