@@ -607,7 +607,7 @@ def _wrapped(env: gym.Env, wrapper: type[gym.Wrapper]) -> bool:
 _SCALARS = (float, int, bool)
 
 _plans: dict[tuple, Any] = {}
-"""``_merge_scalars``' plans by (keys, their types): the merged dict's names in order
+"""``_MergeAhead``'s plans by (keys, their types): the merged dict's names in order
 (``key``, ``_key``, …), the numeric types' columns, per key its row among the numeric
 blocks' rows (their concatenation; −1: a string) and the string keys' positions; False
 where the fast path does not apply."""
