@@ -122,3 +122,37 @@ def test_the_injector_acts_at_the_world_and_the_image() -> None:
     # the same seed, the same shake
     again = FaultInjector(schedule, np.random.default_rng(0))
     assert again.world(3, _Car())[2] == yaw
+
+
+def test_an_empty_schedule_leaves_pose_and_pixels_alone() -> None:
+    from tfalda_sim.faults import FaultInjector
+
+    injector = FaultInjector((), np.random.default_rng(0))
+    car = _Car()
+    rng_state = injector.rng.bit_generator.state
+    assert injector.world(5, car) == (1.0, 2.0, 0.0) and car.pose == (1.0, 2.0, 0.0)
+    crops = [np.full((4, 4), 200, np.uint8)]
+    injector.image(5, crops, [(0, 0, 4, 4)])
+    assert crops[0].min() == 200 and crops[0].max() == 200
+    assert injector.rng.bit_generator.state == rng_state  # nothing drawn
+
+
+def test_an_injector_pickled_before_the_stage_lists_still_acts() -> None:
+    import pickle
+
+    from tfalda_sim.faults import FaultInjector
+
+    schedule = (LateralKick(3, 0.1), Blackout(4, 1))
+    injector = FaultInjector(schedule, np.random.default_rng(0))
+    old_state = {k: v for k, v in injector.__dict__.items()
+                 if k not in ("_kicks", "_shakes", "_image_faults")}
+    old = FaultInjector.__new__(FaultInjector)
+    old.__setstate__(old_state)
+    copy = pickle.loads(pickle.dumps(old))
+    for restored in (old, copy):
+        car = _Car()
+        restored.world(3, car)
+        assert car.pose == pytest.approx((1.0, 2.1, 0.0))
+        crops = [np.full((4, 4), 200, np.uint8)]
+        restored.image(4, crops, [(0, 0, 4, 4)])
+        assert crops[0].max() == 0
