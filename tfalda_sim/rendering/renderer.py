@@ -37,7 +37,7 @@ from ..kernels import LITTLE_ENDIAN, load_pair
 from .effects import Effects
 from .obstacles import BoxFaces, draw_faces, visible_faces
 from .pixels import Bonnet, pixel_geometry
-from .scene import LIGHT_RES_M, WALL_TEXEL_M, Scene
+from .scene import LIGHT_RES_M, WALL_TEXEL_M, Scene, _needed_tiles
 
 MOTION_BLUR_SAMPLES: int = 5
 """Sub-frame poses averaged for motion blur."""
@@ -548,6 +548,64 @@ def _pack_windows(boxes: np.ndarray, cuts: np.ndarray, seg_reads: np.ndarray,
     return pieces, s_pieces, tex_rows, level_bounds, wall_lo, wall_hi
 
 
+_NO_TILES = (0.0, 0.0, np.zeros((1, 2), np.int64), np.zeros(1, np.int64),
+             np.ones(1, np.int64), np.ones((1, 2), np.int64), np.zeros(1, np.int64),
+             np.zeros(1, np.uint8), np.zeros(1, np.uint8), np.zeros(1, np.int64))
+"""``MipTiles.need_args``' types for a scene with no tiles to check (``_render_lean``
+does not read them then)."""
+
+
+@njit(cache=True, error_model="numpy")
+def _render_lean(out: np.ndarray, tex: np.ndarray, boxes: np.ndarray, cuts: np.ndarray,
+                 seg_reads: np.ndarray, seg_code: np.ndarray, seg_flags: np.ndarray,
+                 pack: int, lazy: bool, block_start: np.ndarray, block_bounds: np.ndarray,
+                 block_walls: np.ndarray, block: int, block_cols: int, need_args: tuple,
+                 wall_filled: np.ndarray, atlas: np.ndarray, coord_a: np.ndarray,
+                 coord_b: np.ndarray, wall_row: np.ndarray, piece_table: np.ndarray,
+                 levels: int, wall_y: float, affine: np.ndarray, size_x: float,
+                 size_y: float, wall_shift: float, wall_cols: float, gain: np.ndarray,
+                 sheen: np.ndarray, noise: np.ndarray, noise_offset: int, image_width: int,
+                 params: np.ndarray) -> int:
+    """``Renderer.render_windows`` of one pose without light maps or obstacles in view, in
+    one call (the Python between the four kernels it replaces cost 4–6 % of a "lanes" env
+    step: an interpreter whose caches the kernels keep evicting): the
+    windows' packing (``_pack_pieces``), on a ``lazy`` scene the check that everything the
+    view reads is filled (``_view_bounds``, ``_needed_tiles`` with ``need_args``, the
+    wall rows in ``wall_filled``), then ``_sample_atlas`` into the scratch ``tex`` (room
+    for the windows' pixels, ``pack`` and the widest window) and ``_combine`` into
+    ``out``. Returns 0 when rendered; n > 0: nothing done but the n tiles listed by
+    ``_needed_tiles``, which must be filled first; −1: wall rows must be copied in first
+    (``MipTiles.ensure_walls``), nothing listed."""
+    if lazy:  # first: a view that needs tiles returns before any other work
+        bounds, wall_lo, wall_hi = _view_bounds(boxes, block_start, block_bounds,
+                                                block_walls, block, block_cols)
+        if wall_lo <= wall_hi:  # ``MipTiles.ensure_walls``' rows
+            rows = wall_filled.shape[0]
+            lo, hi = max(wall_lo, -1.0), min(wall_hi, float(rows))
+            r0 = min(max(int(math.floor(lo)) - 1, 0), rows)
+            r1 = min(max(int(math.floor(hi)) + 3, 0), rows)
+            for r in range(r0, r1):
+                if not wall_filled[r]:
+                    return -1
+        n = _needed_tiles(bounds, affine.reshape(1, 6), *need_args)
+        if n:
+            return n
+    pieces, s_pieces, tex_rows = _pack_pieces(boxes, cuts, seg_reads, seg_code, seg_flags,
+                                              pack)
+    n_tex = tex_rows * pack
+    zero_len = 0
+    for k in range(boxes.shape[0]):
+        zero_len = max(zero_len, boxes[k, 2])
+    tex[n_tex:n_tex + zero_len] = 0  # ceiling pieces read this tail (``_buffers``)
+    if tex_rows:
+        _sample_atlas(tex, atlas, s_pieces[0], s_pieces[1], s_pieces[2], s_pieces[3],
+                      s_pieces[4], coord_a, coord_b, wall_row, piece_table, levels, wall_y,
+                      affine, size_x, size_y, wall_shift, wall_cols)
+    _combine(out, pieces[3], pieces[0], pieces[1], pieces[2], pieces[4], pieces[5], tex,
+             gain, sheen, noise, noise_offset, image_width, params)
+    return 0
+
+
 _PACK = 1024
 """Pixels per row of the packed sample buffers (the light map is sampled by one
 ``cv2.remap`` of these rows)."""
@@ -655,6 +713,17 @@ class Renderer:
         self._windows: dict[tuple, tuple[tuple[int, int, int, int], ...]] = {}
         self._last_effect_maps: tuple[Effects, tuple] | None = None
         self._noise = _noise_bank()
+        self._lean_tex = np.empty(0, np.uint8)  # ``_render_lean``'s sample buffer
+        # Stand-ins for a scene with nothing left to fill (``_render_lean`` skips them).
+        self._no_tiles = _NO_TILES
+        self._no_walls = np.ones(1, np.bool_)
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        if "_lean_tex" not in state:  # pickled before ``_render_lean``
+            self._lean_tex = np.empty(0, np.uint8)
+            self._no_tiles = _NO_TILES
+            self._no_walls = np.ones(1, np.bool_)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -832,6 +901,68 @@ class Renderer:
         fx = scene.effects
         layout, box_faces, _ = self._scene_data(scene)
         gain, sheen, params = self._maps_for(fx)
+        full_frame = len(boxes) == 1 and boxes[0] == (0, 0, width, height)
+        if not full_frame and scene.light is None and not (speed_m_s * fx.motion_blur_s > 0):
+            # Windows (the ROIs, a new packing every frame) without blur or light: one
+            # kernel call, unless obstacles are in view. A full frame keeps its packing
+            # (cached) and its glue is a small share of its time.
+            uv = visible_faces(self.camera, box_faces, (x, y, yaw), scene.hall.distance_m,
+                               boxes)[0]
+            if not len(uv):
+                crops = self._render_lean(scene, layout, boxes, x, y, yaw, gain, sheen,
+                                          params, frame_seed)
+                if crops is not None:
+                    return crops
+        return self._render_staged(scene, layout, box_faces, boxes, x, y, yaw, gain, sheen,
+                                   params, speed_m_s, frame_seed, full_frame)
+
+    def _render_lean(self, scene: Scene, layout: _Layout, boxes: tuple, x: float, y: float,
+                     yaw: float, gain: np.ndarray, sheen: np.ndarray, params: np.ndarray,
+                     frame_seed: int) -> list[np.ndarray] | None:
+        """``render_windows`` through ``_render_lean`` (the kernel): the crops, or None
+        where wall rows must be copied in first (the staged path does that)."""
+        width, height = self.camera.width, self.camera.height
+        px = layout.pixel
+        boxes_arr = np.array(boxes, np.int64)
+        views = []
+        area = widest = 0
+        for _, _, ww, wh in boxes:
+            views.append((area, area + ww * wh, (wh, ww)))
+            area += ww * wh
+            widest = max(widest, ww)
+        tex = self._lean_tex
+        if len(tex) < area + _PACK + widest:  # grows only (fresh arrays cost page faults)
+            tex = self._lean_tex = np.empty(area + _PACK + max(widest, width), np.uint8)
+        out = np.empty(area, np.uint8)
+        tiles = scene.tiles
+        lazy = tiles is not None and not tiles.complete
+        args = (out, tex, boxes_arr, px.cuts, px.seg_reads, px.seg_code, px.seg_flags, _PACK,
+                lazy, px.block_start, px.block_bounds, px.block_walls, FOOTPRINT_BLOCK_PX,
+                px.block_cols, tiles.need_args if lazy else self._no_tiles,  # type: ignore[union-attr]
+                tiles.wall_filled if lazy else self._no_walls,  # type: ignore[union-attr]
+                scene.atlas, px.coord_a, px.coord_b, px.wall_row, layout.piece_table,
+                layout.levels, layout.wall_y, self._affine(scene, x, y, yaw),
+                float(scene.level0_size[0]), float(scene.level0_size[1]),
+                (yaw % (2 * math.pi)) * (scene.hall.distance_m / WALL_TEXEL_M),
+                float(scene.wall_size[0]), gain, sheen, self._noise,
+                _noise_offset(frame_seed, width * height), width, params)
+        if not lazy:
+            status = _render_lean(*args)
+        elif (status := tiles.run_view(_render_lean, args)) > 0:  # type: ignore[union-attr]
+            # It listed what the view needs and stopped; all of that is filled now (its
+            # walls were there): render without checking again.
+            status = _render_lean(*args[:8], False, *args[9:])
+        if status:
+            return None
+        return [out[a:b].reshape(shape) for a, b, shape in views]
+
+    def _render_staged(self, scene: Scene, layout: _Layout, box_faces: BoxFaces, boxes: tuple,
+                       x: float, y: float, yaw: float, gain: np.ndarray, sheen: np.ndarray,
+                       params: np.ndarray, speed_m_s: float, frame_seed: int,
+                       full_frame: bool) -> list[np.ndarray]:
+        """``render_windows`` kernel by kernel: motion blur, light maps, obstacles."""
+        width, height = self.camera.width, self.camera.height
+        fx = scene.effects
         st = self._stack(boxes, layout.pixel)
         px = layout.pixel
         blur_m = speed_m_s * fx.motion_blur_s
@@ -871,7 +1002,6 @@ class Renderer:
                           dst=light[:n_tex].reshape(st.tex_rows, _PACK, 2),
                           borderMode=cv2.BORDER_REPLICATE)
         sampled = total * np.float32(1.0 / len(shifts)) if blur else tex
-        full_frame = len(boxes) == 1 and boxes[0] == (0, 0, width, height)
         uv, bbox, shading = visible_faces(self.camera, box_faces, (x, y, yaw),
                                           scene.hall.distance_m, None if full_frame else boxes)
         drawn = draw_faces(uv, bbox, fx.line_dn * shading, width, height) if len(uv) else None

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 import mmap
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -516,6 +517,26 @@ class MipTiles:
         except BaseException:
             self.need[:] = 0  # all 0 between calls: a Ctrl-C must not leave tiles unlisted
             raise
+
+    @property
+    def need_args(self) -> tuple:
+        """``_needed_tiles``' arguments after the view's, for a kernel that checks a view
+        itself (``Renderer``'s ``_render_lean``, run by ``run_view``)."""
+        self._check_live()
+        return self._need_args
+
+    def run_view(self, kernel: Callable[..., int], args: tuple) -> int:
+        """``kernel(*args)``, a kernel that lists the tiles a view still needs with
+        ``_needed_tiles`` (its ``need_args``) and returns how many, before it reads any;
+        those are filled here. Returns that count (0: the kernel went on and read)."""
+        try:
+            n = kernel(*args)
+            if n > 0:
+                self._fill(n)
+        except BaseException:
+            self.need[:] = 0  # as ``ensure``: no tile may stay listed between calls
+            raise
+        return n
 
     def ensure_walls(self, lo: float, hi: float) -> None:
         """Copy in the wall texture rows that bilinear taps of rows ``lo … hi`` [texels]

@@ -493,22 +493,32 @@ def test_a_fill_that_fails_is_filled_by_the_next_view(renderer: Renderer, monkey
         np.testing.assert_array_equal(got, want)
 
 
-@pytest.mark.parametrize("where", ["_needed_tiles", "_paint_listed", "_finish_fill"])
+FULL_FRAME = [(0, 0, 752, 480)]
+"""A full frame: rendered kernel by kernel (``Scene.prepare`` fills), where the ROIs take
+``_render_lean``, which lists the tiles itself."""
+
+
+@pytest.mark.parametrize(("where", "windows"), [
+    ("_needed_tiles", FULL_FRAME), ("_render_lean", ROIS), ("_paint_listed", ROIS),
+    ("_finish_fill", ROIS), ("_paint_listed", FULL_FRAME)])
 def test_a_ctrl_c_as_a_fill_kernel_returns_leaves_consistent_state(
-        renderer: Renderer, monkeypatch, where: str) -> None:
+        renderer: Renderer, monkeypatch, where: str, windows: list) -> None:
     """A Ctrl-C is raised when the kernel running at that moment returns, after it
-    changed the arrays: after listing the needed tiles, after painting level 0, after the
-    mips marked them filled. In each case nothing stays marked needed (or those tiles
-    would never be listed again), the filled count matches ``filled`` (or the scene would
-    never count as complete), every tile painted into the atlas is on the list a retiring
-    scene zeroes, and the next view renders the eager frames."""
+    changed the arrays: after listing the needed tiles (``_needed_tiles`` for a frame
+    rendered kernel by kernel, ``_render_lean`` for windows), after painting level 0,
+    after the mips marked them filled. In each case nothing stays marked needed (or those
+    tiles would never be listed again), the filled count matches ``filled`` (or the scene
+    would never count as complete), every tile painted into the atlas is on the list a
+    retiring scene zeroes, and the next view renders the eager frames."""
+    import tfalda_sim.rendering.renderer as renderer_module
     import tfalda_sim.rendering.scene as scene_module
     import tfalda_sim.tracks.raster as raster_module
 
     track = replace(generated(8), name=f"interrupted at {where}")
     lazy = build_scene(track, Effects(), np.random.default_rng(4))
     eager = build_scene(track, Effects(), np.random.default_rng(4), lazy=False)
-    module = scene_module if where != "_paint_listed" else raster_module
+    module = {"_paint_listed": raster_module, "_render_lean": renderer_module}.get(
+        where, scene_module)
     real = getattr(module, where)
     calls = []
 
@@ -522,17 +532,19 @@ def test_a_ctrl_c_as_a_fill_kernel_returns_leaves_consistent_state(
     monkeypatch.setattr(module, where, interrupted)
     pose = _poses(track, 1, 8)[0]
     with pytest.raises(KeyboardInterrupt):
-        renderer.render_windows(lazy, pose, ROIS)
+        renderer.render_windows(lazy, pose, windows)
+    listing_only = where in ("_needed_tiles", "_render_lean")
     t = lazy.tiles
     assert not t.need.any()
     assert t.n_filled == np.count_nonzero(t.filled)
     assert (t.n_filled > 0) == (where == "_finish_fill")
     # The marking map's own list (what a scene sharing the map zeroes when it retires).
     painted = np.flatnonzero(t.marking.filled)
-    assert (len(painted) > 0) == (where != "_needed_tiles")
+    assert (len(painted) > 0) == (not listing_only)
     assert set(painted.tolist()) <= set(t.marking.painted_tiles().tolist())
-    for got, want in zip(renderer.render_windows(lazy, pose, ROIS, frame_seed=1),
-                         renderer.render_windows(eager, pose, ROIS, frame_seed=1), strict=True):
+    for got, want in zip(renderer.render_windows(lazy, pose, windows, frame_seed=1),
+                         renderer.render_windows(eager, pose, windows, frame_seed=1),
+                         strict=True):
         np.testing.assert_array_equal(got, want)
     assert t.n_filled == np.count_nonzero(t.filled) > 0 and not t.need.any()
 
