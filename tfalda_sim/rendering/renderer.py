@@ -924,12 +924,7 @@ class Renderer:
         width, height = self.camera.width, self.camera.height
         px = layout.pixel
         boxes_arr = np.array(boxes, np.int64)
-        views = []
-        area = widest = 0
-        for _, _, ww, wh in boxes:
-            views.append((area, area + ww * wh, (wh, ww)))
-            area += ww * wh
-            widest = max(widest, ww)
+        views, area, widest = _window_views(boxes)
         tex = self._lean_tex
         if len(tex) < area + _PACK + widest:  # grows only (fresh arrays cost page faults)
             tex = self._lean_tex = np.empty(area + _PACK + max(widest, width), np.uint8)
@@ -1046,12 +1041,7 @@ class Renderer:
             np.array(boxes, np.int64), px.cuts, px.seg_reads, px.seg_code, px.seg_flags,
             _PACK, px.block_start, px.block_bounds, px.block_walls, FOOTPRINT_BLOCK_PX,
             px.block_cols)
-        views = []
-        out_len = zero_len = 0
-        for _, _, ww, wh in boxes:
-            views.append((out_len, out_len + ww * wh, (wh, ww)))
-            out_len += ww * wh
-            zero_len = max(zero_len, ww)
+        views, out_len, zero_len = _window_views(boxes)
         stack = _Stack(rows=pieces[0], cols=pieces[1], widths=pieces[2],
                        out_offsets=pieces[3], tex_offsets=pieces[4], flags=pieces[5],
                        s_rows=s_pieces[0],
@@ -1071,6 +1061,20 @@ class Renderer:
         ox, oy = scene.origin
         return np.array([c * inv, -s * inv, (x - ox) * inv - 0.5,
                          -s * inv, -c * inv, (oy - y) * inv - 0.5])
+
+
+def _window_views(boxes: tuple[tuple[int, int, int, int], ...]
+                  ) -> tuple[list[tuple[int, int, tuple[int, int]]], int, int]:
+    """Where each window's crop lies in the flat output, back to back: per window its
+    slice ``(start, stop)`` and shape ``(h, w)``; the total pixel count and the widest
+    window [px]."""
+    views = []
+    area = widest = 0
+    for _, _, ww, wh in boxes:
+        views.append((area, area + ww * wh, (wh, ww)))
+        area += ww * wh
+        widest = max(widest, ww)
+    return views, area, widest
 
 
 @functools.cache
