@@ -6,13 +6,18 @@ interrupt path — keep what was finished, say what, exit ``128 + signal`` — s
 three. ``ignoring_stops()`` shields the few seconds in which a command saves what it
 finished: a second Ctrl-C there would otherwise throw away the first one's results.
 ``deferring_stops()`` holds a stop back while one finished result goes to its outputs.
+A stop whose handler ran inside a finalizer (where CPython drops exceptions) is raised
+again a moment later, so no Ctrl-C is lost.
 """
 
 from __future__ import annotations
 
+import _thread
 import contextlib
 import signal
+import sys
 import threading
+import time
 from collections.abc import Callable, Iterator
 from types import FrameType
 from typing import Any
@@ -77,8 +82,45 @@ def stop_signals_interrupt() -> Iterator[None]:
                 chosen[sig] = _raise_interrupt
         return chosen
 
-    with _handling(choose):
-        yield
+    with _handling(choose) as saved:
+        if saved is None:  # not the main thread: no signals here
+            yield
+            return
+        previous = sys.unraisablehook
+        sys.unraisablehook = _redeliver(previous)
+        try:
+            yield
+        finally:
+            sys.unraisablehook = previous
+
+
+def _redeliver(previous: Callable[[Any], object]) -> Callable[[Any], object]:
+    """An ``unraisablehook`` that delivers a stop again when CPython dropped it: a signal
+    handler runs at the next bytecode, which may be inside a finalizer (cffi's callback
+    freeing a pymunk space, a ``__del__``), where a raised exception is only reported as
+    unraisable and the Ctrl-C would be lost. Other unraisable errors go to ``previous``."""
+
+    def hook(unraisable: Any) -> object:
+        exc = unraisable.exc_value
+        if exc is not None and is_interrupt(exc):
+            # Raised again in the main flow: from a thread, a moment later (the handler
+            # would run at this hook's next bytecode, and be dropped again).
+            threading.Thread(target=_interrupt_main_soon, args=(_last_signal,),
+                             daemon=True).start()
+            return None
+        return previous(unraisable)
+
+    return hook
+
+
+REDELIVER_DELAY_S: float = 0.002
+"""How long a dropped stop waits before it is raised again [s]: long enough for the main
+thread to leave the finalizer and the hook that reported it."""
+
+
+def _interrupt_main_soon(signum: int) -> None:
+    time.sleep(REDELIVER_DELAY_S)
+    _thread.interrupt_main(signum)
 
 
 def last_stop_signal() -> int:

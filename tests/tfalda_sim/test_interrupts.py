@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -56,9 +58,11 @@ def test_a_wrapped_ctrl_c_is_an_interrupt_and_other_errors_are_not() -> None:
         consume(iter([1]), lambda x: (_ for _ in ()).throw(SystemError("a bug")))
 
 
-def _spin() -> None:
-    """Run bytecode, so that a pending signal handler runs."""
-    for _ in range(10**5):
+def _spin(seconds: float = 0.05) -> None:
+    """Run bytecode for a while, so that a pending signal handler runs (one delivered
+    again from a thread, ``REDELIVER_DELAY_S`` later, included)."""
+    end = time.perf_counter() + seconds
+    while time.perf_counter() < end:
         pass
 
 
@@ -117,3 +121,38 @@ def test_a_ctrl_c_while_a_sweep_writes_a_result_keeps_that_result_whole(
     assert seen == [{"x": 0}, {"x": 1}]
     assert frames.read_text() == "0 a\n0 b\n1 a\n1 b\n"
     assert journal.read_text().splitlines()[1:] == ['{"x": 0}', '{"x": 1}']
+
+
+class _StoppedInFinalizer:
+    """Raises a Ctrl-C as it is freed (what a signal handler does when the next bytecode
+    runs inside a finalizer, e.g. cffi's callback freeing a pymunk space)."""
+
+    def __del__(self) -> None:
+        raise KeyboardInterrupt
+
+
+def test_a_ctrl_c_dropped_inside_a_finalizer_is_delivered_again() -> None:
+    with stop_signals_interrupt():
+        with pytest.raises(KeyboardInterrupt):
+            doomed = _StoppedInFinalizer()
+            del doomed  # CPython reports the exception as unraisable and goes on
+            _spin()
+        with pytest.raises(KeyboardInterrupt):  # SIGTERM's too, as SIGTERM
+            os.kill(os.getpid(), signal.SIGTERM)
+            _spin()
+        assert last_stop_signal() == signal.SIGTERM
+        with pytest.raises(KeyboardInterrupt):
+            doomed = _StoppedInFinalizer()
+            del doomed
+            _spin()
+        assert last_stop_signal() == signal.SIGTERM
+    seen: list[object] = []
+    previous = sys.unraisablehook
+    sys.unraisablehook = seen.append
+    try:
+        doomed = _StoppedInFinalizer()
+        del doomed  # outside the block: CPython's behaviour, nothing delivered
+        _spin()
+    finally:
+        sys.unraisablehook = previous
+    assert len(seen) == 1
