@@ -87,14 +87,18 @@ def stop_signals_interrupt() -> Iterator[None]:
             yield
             return
         previous = sys.unraisablehook
-        sys.unraisablehook = _redeliver(previous)
+        active = threading.Event()
+        active.set()
+        sys.unraisablehook = _redeliver(previous, active)
         try:
             yield
         finally:
+            active.clear()  # a stop delivered again after the block would hit its caller
             sys.unraisablehook = previous
 
 
-def _redeliver(previous: Callable[[Any], object]) -> Callable[[Any], object]:
+def _redeliver(previous: Callable[[Any], object], active: threading.Event
+               ) -> Callable[[Any], object]:
     """An ``unraisablehook`` that delivers a stop again when CPython dropped it: a signal
     handler runs at the next bytecode, which may be inside a finalizer (cffi's callback
     freeing a pymunk space, a ``__del__``), where a raised exception is only reported as
@@ -105,7 +109,7 @@ def _redeliver(previous: Callable[[Any], object]) -> Callable[[Any], object]:
         if exc is not None and is_interrupt(exc):
             # Raised again in the main flow: from a thread, a moment later (the handler
             # would run at this hook's next bytecode, and be dropped again).
-            threading.Thread(target=_interrupt_main_soon, args=(_last_signal,),
+            threading.Thread(target=_interrupt_main_soon, args=(_last_signal, active),
                              daemon=True).start()
             return None
         return previous(unraisable)
@@ -118,9 +122,10 @@ REDELIVER_DELAY_S: float = 0.002
 thread to leave the finalizer and the hook that reported it."""
 
 
-def _interrupt_main_soon(signum: int) -> None:
+def _interrupt_main_soon(signum: int, active: threading.Event) -> None:
     time.sleep(REDELIVER_DELAY_S)
-    _thread.interrupt_main(signum)
+    if active.is_set():  # still inside ``stop_signals_interrupt()``
+        _thread.interrupt_main(signum)
 
 
 def last_stop_signal() -> int:

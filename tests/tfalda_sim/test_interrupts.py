@@ -146,6 +146,10 @@ def test_a_ctrl_c_dropped_inside_a_finalizer_is_delivered_again() -> None:
             del doomed
             _spin()
         assert last_stop_signal() == signal.SIGTERM
+    with stop_signals_interrupt():
+        doomed = _StoppedInFinalizer()
+        del doomed  # dropped as the block ends: not delivered to what follows it
+    _spin()
     seen: list[object] = []
     previous = sys.unraisablehook
     sys.unraisablehook = seen.append
