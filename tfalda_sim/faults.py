@@ -250,8 +250,7 @@ class FaultInjector:
         # asks (≈ 5 µs a step to find nothing).
         self._kicks = tuple(f for f in self.schedule if isinstance(f, LateralKick))
         self._shakes = tuple(f for f in self.schedule if isinstance(f, CameraShake))
-        self._image_faults = tuple(f for f in self.schedule
-                                   if isinstance(f, Blackout | Overexposure | Glare))
+        self._image_faults = tuple(f for f in self.schedule if isinstance(f, ImageFault))
 
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__dict__.update(state)
@@ -281,5 +280,4 @@ class FaultInjector:
         """Apply the image faults of ``step`` to ``crops`` (in place; see
         ``apply_image_faults``)."""
         if self._image_faults:
-            apply_image_faults(crops, windows, active(self._image_faults, step,
-                                                      Blackout | Overexposure | Glare))
+            apply_image_faults(crops, windows, active(self._image_faults, step, ImageFault))

@@ -554,6 +554,9 @@ _NO_TILES = (0.0, 0.0, np.zeros((1, 2), np.int64), np.zeros(1, np.int64),
 """``MipTiles.need_args``' types for a scene with no tiles to check (``_render_lean``
 does not read them then)."""
 
+_NO_WALLS = np.ones(1, np.bool_)
+"""``MipTiles.wall_filled``'s type for such a scene."""
+
 
 @njit(cache=True, error_model="numpy")
 def _render_lean(out: np.ndarray, tex: np.ndarray, boxes: np.ndarray, cuts: np.ndarray,
@@ -714,16 +717,11 @@ class Renderer:
         self._last_effect_maps: tuple[Effects, tuple] | None = None
         self._noise = _noise_bank()
         self._lean_tex = np.empty(0, np.uint8)  # ``_render_lean``'s sample buffer
-        # Stand-ins for a scene with nothing left to fill (``_render_lean`` skips them).
-        self._no_tiles = _NO_TILES
-        self._no_walls = np.ones(1, np.bool_)
 
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__dict__.update(state)
         if "_lean_tex" not in state:  # pickled before ``_render_lean``
             self._lean_tex = np.empty(0, np.uint8)
-            self._no_tiles = _NO_TILES
-            self._no_walls = np.ones(1, np.bool_)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -933,8 +931,8 @@ class Renderer:
         lazy = tiles is not None and not tiles.complete
         args = (out, tex, boxes_arr, px.cuts, px.seg_reads, px.seg_code, px.seg_flags, _PACK,
                 lazy, px.block_start, px.block_bounds, px.block_walls, FOOTPRINT_BLOCK_PX,
-                px.block_cols, tiles.need_args if lazy else self._no_tiles,  # type: ignore[union-attr]
-                tiles.wall_filled if lazy else self._no_walls,  # type: ignore[union-attr]
+                px.block_cols, tiles.need_args if lazy else _NO_TILES,  # type: ignore[union-attr]
+                tiles.wall_filled if lazy else _NO_WALLS,  # type: ignore[union-attr]
                 scene.atlas, px.coord_a, px.coord_b, px.wall_row, layout.piece_table,
                 layout.levels, layout.wall_y, self._affine(scene, x, y, yaw),
                 float(scene.level0_size[0]), float(scene.level0_size[1]),
