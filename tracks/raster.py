@@ -783,6 +783,7 @@ class TiledMarkingMap:
         hold paint: a row whose bit is clear holds only zeros (~4 rows in 5 of the tiles a
         camera sees), so a lazy scene neither reads nor clears it."""
         self._boxes: np.ndarray | None = None  # ``_chunk_boxes``, on the first fill
+        self._paint_args: tuple | None = None  # ``paint_args``, made on first use
         t = track.table
         gaps = track.gaps
         passes = np.array([s for x in track.intersections for s in (x.s1_m, x.s2_m)],
@@ -816,6 +817,7 @@ class TiledMarkingMap:
     @intensity.setter
     def intensity(self, value: np.ndarray) -> None:
         self._intensity = value
+        self._paint_args = None  # they hold the intensity
 
     @property
     def complete(self) -> bool:
@@ -830,6 +832,7 @@ class TiledMarkingMap:
         self.nonzero_rows[:] = 0
         self._n_record[0] = 0
         self._intensity = None  # fresh zeros when next asked for
+        self._paint_args = None  # they hold the old memory
         if self.labels is not None:
             self.labels = untouched_zeros(self.shape)
 
@@ -862,16 +865,31 @@ class TiledMarkingMap:
         frame): an int64 1-D array, unchecked; indices past the grid are skipped (a
         scene's list of its levels' tiles: level 0 first, numbered as here). Returns how
         many tiles were painted."""
-        if self._boxes is None:
-            ox, oy, res, x0, y0, h0, kappa, length = self._args[:8]
-            lane_w, line_w, chunk_m = self._args[11], self._args[12], self._args[-1]
-            self._boxes = _chunk_boxes(*self.shape, ox, oy, res, x0, y0, h0, kappa, length,
-                                       lane_w, line_w, chunk_m)
-        return _paint_listed(tiles, self.filled.reshape(-1), self._todo, self._record,
-                             self._n_record, self.intensity,
-                             self.labels if self.labels is not None else _NO_LABELS,
-                             *self._args, self._boxes, self.tile_px, self.labels is not None,
-                             self.nonzero_rows)
+        return _paint_listed(tiles, *self.paint_args)
+
+    @property
+    def paint_args(self) -> tuple:
+        """``_paint_listed``'s arguments after the list of tiles, for a kernel that paints
+        tiles itself (a lazy scene's fill inside its renderer's kernel). The same tuple
+        until the map's memory changes (``detach``, a new ``intensity``): a caller keeping
+        it checks ``is`` against this property before each use."""
+        if self._paint_args is None:
+            if self._boxes is None:
+                ox, oy, res, x0, y0, h0, kappa, length = self._args[:8]
+                lane_w, line_w, chunk_m = self._args[11], self._args[12], self._args[-1]
+                self._boxes = _chunk_boxes(*self.shape, ox, oy, res, x0, y0, h0, kappa,
+                                           length, lane_w, line_w, chunk_m)
+            self._paint_args = (
+                self.filled.reshape(-1), self._todo, self._record, self._n_record,
+                self.intensity, self.labels if self.labels is not None else _NO_LABELS,
+                *self._args, self._boxes, self.tile_px, self.labels is not None,
+                self.nonzero_rows)
+        return self._paint_args
+
+    def __getstate__(self) -> dict[str, object]:
+        state = self.__dict__.copy()
+        state["_paint_args"] = None  # views of the state's arrays: a copy makes its own
+        return state
 
     def painted_tiles(self) -> np.ndarray:
         """The painted tiles' indices into ``filled`` (row-major, each once), in the order
@@ -880,6 +898,7 @@ class TiledMarkingMap:
 
     def __setstate__(self, state: dict[str, object]) -> None:
         self.__dict__.update(state)
+        self._paint_args = None  # pickled before them, or they held the old arrays
         if "intensity" in state:  # pickled before the lazy intensity
             self._intensity = self.__dict__.pop("intensity")
             self._shape = self._intensity.shape

@@ -37,7 +37,7 @@ from ..kernels import LITTLE_ENDIAN, load_pair
 from .effects import Effects
 from .obstacles import BoxFaces, draw_faces, visible_faces
 from .pixels import Bonnet, pixel_geometry
-from .scene import LIGHT_RES_M, WALL_TEXEL_M, Scene, _needed_tiles
+from .scene import LIGHT_RES_M, WALL_TEXEL_M, Scene, _fill_tiles, _needed_tiles
 
 MOTION_BLUR_SAMPLES: int = 5
 """Sub-frame poses averaged for motion blur."""
@@ -548,51 +548,19 @@ def _pack_windows(boxes: np.ndarray, cuts: np.ndarray, seg_reads: np.ndarray,
     return pieces, s_pieces, tex_rows, level_bounds, wall_lo, wall_hi
 
 
-_NO_TILES = (0.0, 0.0, np.zeros((1, 2), np.int64), np.zeros(1, np.int64),
-             np.ones(1, np.int64), np.ones((1, 2), np.int64), np.zeros(1, np.int64),
-             np.zeros(1, np.uint8), np.zeros(1, np.uint8), np.zeros(1, np.int64))
-"""``MipTiles.need_args``' types for a scene with no tiles to check (``_render_lean``
-does not read them then)."""
-
-_NO_WALLS = np.ones(1, np.bool_)
-"""``MipTiles.wall_filled``'s type for such a scene."""
-
-
 @njit(cache=True, error_model="numpy")
 def _render_lean(out: np.ndarray, tex: np.ndarray, boxes: np.ndarray, cuts: np.ndarray,
                  seg_reads: np.ndarray, seg_code: np.ndarray, seg_flags: np.ndarray,
-                 pack: int, lazy: bool, block_start: np.ndarray, block_bounds: np.ndarray,
-                 block_walls: np.ndarray, block: int, block_cols: int, need_args: tuple,
-                 wall_filled: np.ndarray, atlas: np.ndarray, coord_a: np.ndarray,
-                 coord_b: np.ndarray, wall_row: np.ndarray, piece_table: np.ndarray,
-                 levels: int, wall_y: float, affine: np.ndarray, size_x: float,
-                 size_y: float, wall_shift: float, wall_cols: float, gain: np.ndarray,
-                 sheen: np.ndarray, noise: np.ndarray, noise_offset: int, image_width: int,
-                 params: np.ndarray) -> int:
+                 pack: int, atlas: np.ndarray, coord_a: np.ndarray, coord_b: np.ndarray,
+                 wall_row: np.ndarray, piece_table: np.ndarray, levels: int, wall_y: float,
+                 affine: np.ndarray, size_x: float, size_y: float, wall_shift: float,
+                 wall_cols: float, gain: np.ndarray, sheen: np.ndarray, noise: np.ndarray,
+                 noise_offset: int, image_width: int, params: np.ndarray) -> int:
     """``Renderer.render_windows`` of one pose without light maps or obstacles in view, in
     one call (the Python between the four kernels it replaces cost 4–6 % of a "lanes" env
-    step: an interpreter whose caches the kernels keep evicting): the
-    windows' packing (``_pack_pieces``), on a ``lazy`` scene the check that everything the
-    view reads is filled (``_view_bounds``, ``_needed_tiles`` with ``need_args``, the
-    wall rows in ``wall_filled``), then ``_sample_atlas`` into the scratch ``tex`` (room
-    for the windows' pixels, ``pack`` and the widest window) and ``_combine`` into
-    ``out``. Returns 0 when rendered; n > 0: nothing done but the n tiles listed by
-    ``_needed_tiles``, which must be filled first; −1: wall rows must be copied in first
-    (``MipTiles.ensure_walls``), nothing listed."""
-    if lazy:  # first: a view that needs tiles returns before any other work
-        bounds, wall_lo, wall_hi = _view_bounds(boxes, block_start, block_bounds,
-                                                block_walls, block, block_cols)
-        if wall_lo <= wall_hi:  # ``MipTiles.ensure_walls``' rows
-            rows = wall_filled.shape[0]
-            lo, hi = max(wall_lo, -1.0), min(wall_hi, float(rows))
-            r0 = min(max(int(math.floor(lo)) - 1, 0), rows)
-            r1 = min(max(int(math.floor(hi)) + 3, 0), rows)
-            for r in range(r0, r1):
-                if not wall_filled[r]:
-                    return -1
-        n = _needed_tiles(bounds, affine.reshape(1, 6), *need_args)
-        if n:
-            return n
+    step: an interpreter whose caches the kernels keep evicting): the windows' packing
+    (``_pack_pieces``), ``_sample_atlas`` into the scratch ``tex`` (room for the windows'
+    pixels, ``pack`` and the widest window) and ``_combine`` into ``out``. Returns 0."""
     pieces, s_pieces, tex_rows = _pack_pieces(boxes, cuts, seg_reads, seg_code, seg_flags,
                                               pack)
     n_tex = tex_rows * pack
@@ -607,6 +575,43 @@ def _render_lean(out: np.ndarray, tex: np.ndarray, boxes: np.ndarray, cuts: np.n
     _combine(out, pieces[3], pieces[0], pieces[1], pieces[2], pieces[4], pieces[5], tex,
              gain, sheen, noise, noise_offset, image_width, params)
     return 0
+
+
+@njit(cache=True, error_model="numpy")
+def _render_lazy(block_start: np.ndarray, block_bounds: np.ndarray, block_walls: np.ndarray,
+                 block: int, block_cols: int, need_args: tuple, wall_filled: np.ndarray,
+                 fill: tuple, out: np.ndarray, tex: np.ndarray, boxes: np.ndarray,
+                 cuts: np.ndarray, seg_reads: np.ndarray, seg_code: np.ndarray,
+                 seg_flags: np.ndarray, pack: int, atlas: np.ndarray, coord_a: np.ndarray,
+                 coord_b: np.ndarray, wall_row: np.ndarray, piece_table: np.ndarray,
+                 levels: int, wall_y: float, affine: np.ndarray, size_x: float,
+                 size_y: float, wall_shift: float, wall_cols: float, gain: np.ndarray,
+                 sheen: np.ndarray, noise: np.ndarray, noise_offset: int, image_width: int,
+                 params: np.ndarray) -> int:
+    """``_render_lean`` on a lazy scene, in one call with what the view reads filled
+    first (a new generated track fills tiles on most steps: two more kernel calls and
+    their Python, saved): the tiles ``_needed_tiles`` lists (with the scene's
+    ``need_args``, the view's boxes from ``_view_bounds``) filled by ``_fill_tiles`` (its
+    ``fill_args``). Returns −1, nothing done, where wall rows must be copied in first
+    (``MipTiles.ensure_walls``: ``wall_filled``); else how many tiles it filled (≥ 0),
+    the windows rendered."""
+    bounds, wall_lo, wall_hi = _view_bounds(boxes, block_start, block_bounds, block_walls,
+                                            block, block_cols)
+    if wall_lo <= wall_hi:  # ``MipTiles.ensure_walls``' rows
+        rows = wall_filled.shape[0]
+        lo, hi = max(wall_lo, -1.0), min(wall_hi, float(rows))
+        r0 = min(max(int(math.floor(lo)) - 1, 0), rows)
+        r1 = min(max(int(math.floor(hi)) + 3, 0), rows)
+        for r in range(r0, r1):
+            if not wall_filled[r]:
+                return -1
+    n = _needed_tiles(bounds, affine.reshape(1, 6), *need_args)
+    if n:
+        _fill_tiles(n, fill)
+    _render_lean(out, tex, boxes, cuts, seg_reads, seg_code, seg_flags, pack, atlas, coord_a,
+                 coord_b, wall_row, piece_table, levels, wall_y, affine, size_x, size_y,
+                 wall_shift, wall_cols, gain, sheen, noise, noise_offset, image_width, params)
+    return n
 
 
 _PACK = 1024
@@ -921,32 +926,27 @@ class Renderer:
         where wall rows must be copied in first (the staged path does that)."""
         width, height = self.camera.width, self.camera.height
         px = layout.pixel
-        boxes_arr = np.array(boxes, np.int64)
         views, area, widest = _window_views(boxes)
         tex = self._lean_tex
         if len(tex) < area + _PACK + widest:  # grows only (fresh arrays cost page faults)
             tex = self._lean_tex = np.empty(area + _PACK + max(widest, width), np.uint8)
         out = np.empty(area, np.uint8)
-        tiles = scene.tiles
-        lazy = tiles is not None and not tiles.complete
-        args = (out, tex, boxes_arr, px.cuts, px.seg_reads, px.seg_code, px.seg_flags, _PACK,
-                lazy, px.block_start, px.block_bounds, px.block_walls, FOOTPRINT_BLOCK_PX,
-                px.block_cols, tiles.need_args if lazy else _NO_TILES,  # type: ignore[union-attr]
-                tiles.wall_filled if lazy else _NO_WALLS,  # type: ignore[union-attr]
-                scene.atlas, px.coord_a, px.coord_b, px.wall_row, layout.piece_table,
-                layout.levels, layout.wall_y, self._affine(scene, x, y, yaw),
-                float(scene.level0_size[0]), float(scene.level0_size[1]),
+        args = (out, tex, np.array(boxes, np.int64), px.cuts, px.seg_reads, px.seg_code,
+                px.seg_flags, _PACK, scene.atlas, px.coord_a, px.coord_b, px.wall_row,
+                layout.piece_table, layout.levels, layout.wall_y,
+                self._affine(scene, x, y, yaw), float(scene.level0_size[0]),
+                float(scene.level0_size[1]),
                 (yaw % (2 * math.pi)) * (scene.hall.distance_m / WALL_TEXEL_M),
                 float(scene.wall_size[0]), gain, sheen, self._noise,
                 _noise_offset(frame_seed, width * height), width, params)
-        if not lazy:
-            status = _render_lean(*args)
-        elif (status := tiles.run_view(_render_lean, args)) > 0:  # type: ignore[union-attr]
-            # It listed what the view needs and stopped; all of that is filled now (its
-            # walls were there): render without checking again.
-            status = _render_lean(*args[:8], False, *args[9:])
-        if status:
-            return None
+        tiles = scene.tiles
+        if tiles is None or tiles.complete:
+            _render_lean(*args)
+        elif tiles.run_view(_render_lazy, (px.block_start, px.block_bounds, px.block_walls,
+                                           FOOTPRINT_BLOCK_PX, px.block_cols,
+                                           tiles.need_args, tiles.wall_filled,
+                                           tiles.fill_args, *args)) < 0:
+            return None  # wall rows to copy in: the staged path does that
         return [out[a:b].reshape(shape) for a, b, shape in views]
 
     def _render_staged(self, scene: Scene, layout: _Layout, box_faces: BoxFaces, boxes: tuple,

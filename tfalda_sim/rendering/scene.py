@@ -23,6 +23,7 @@ from tfalda_sim.tracks.raster import (
     DEFAULT_RESOLUTION_M,
     TILE_PX,
     TiledMarkingMap,
+    _paint_listed,
     map_geometry,
     memory_of,
     row_bit,
@@ -358,6 +359,29 @@ def _finish_fill(atlas: np.ndarray, origins: np.ndarray, queue: np.ndarray,
 
 
 @njit(cache=True)
+def _fill_tiles(n: int, fill: tuple) -> None:
+    """Fill the ``n`` tiles listed first in the queue (sorted, level 0 first: what
+    ``_needed_tiles`` lists), with ``fill`` = ``MipTiles.fill_args``, in one call (one
+    kernel: a Ctrl-C finds a fill done or not begun): log them for ``retire``
+    (``written[:n_written[0]]``, each tile once: only unfilled ones are listed), paint
+    level 0 (``_paint_listed``; into the atlas, or copied in worn by ``_store_level0``),
+    then ``_finish_fill``."""
+    (queue, written, n_written, paint, in_atlas, atlas, guard, intensity, remaining,
+     use_wear, n_level0, grid_cols, t0, painted_rows, own_rows, rows0, origins, sizes,
+     tile, grids, offsets, filled, need) = fill
+    tiles = queue[:n]
+    m = n_written[0]
+    written[m:m + n] = tiles
+    n_written[0] = m + n
+    _paint_listed(tiles, *paint)
+    if not in_atlas:
+        _store_level0(atlas, guard, intensity, remaining, use_wear, tiles, n_level0,
+                      grid_cols, t0, painted_rows, own_rows)
+    _finish_fill(atlas, origins, tiles, sizes, tile, grids, offsets, filled, need, rows0,
+                 own_rows)
+
+
+@njit(cache=True)
 def _zero_tiles(atlas: np.ndarray, origins: np.ndarray, tiles: np.ndarray, sizes: np.ndarray,
                 tile: np.ndarray, grids: np.ndarray, offsets: np.ndarray, rows0: np.ndarray,
                 rows: np.ndarray) -> None:
@@ -374,6 +398,9 @@ def _zero_tiles(atlas: np.ndarray, origins: np.ndarray, tiles: np.ndarray, sizes
             if mask & row_bit(r - tr * t):
                 atlas[y + r, c0:c1] = 0
 
+
+_NO_WEAR = np.ones((1, 1), np.float32)
+"""``_store_level0``'s wear argument for a scene without wear (not read then)."""
 
 RETIRED_MESSAGE = ("this scene was retired: build_scene(reuse=scene) handed its memory to a "
                    "newer scene; build it again to render it")
@@ -422,12 +449,16 @@ class MipTiles:
         # tile is zeros, neither read for the levels above nor cleared by ``retire``.
         # Level 0 painted in the atlas: the marking map's (``_level0_rows``).
         self.nonzero_rows = np.zeros(len(self.filled), np.int64)
-        self.n_filled = 0
         self._queue = np.empty(len(self.filled), np.int64)  # scratch: the tiles to fill
         self._need_args = self._needed_tiles_args()
-        self._written_runs: list[np.ndarray] = []  # tiles (maybe) written, fill by fill
-        self.complete = False
-        self._tiles_complete = False
+        # The tiles written to the atlas, fill by fill: ``_written[:_n_written[0]]``,
+        # appended to by the fill kernel (each tile once: a fill lists unfilled tiles and
+        # fills them all), so it also counts the filled tiles.
+        self._written = np.empty(len(self.filled), np.int64)
+        self._n_written = np.zeros(1, np.int64)
+        self._retire_extra = np.zeros(0, np.int64)  # more tiles to zero (old pickles)
+        self._fill_args: tuple | None = None  # ``fill_args``, made on first use
+        self._walls_complete = False
         self.retired = False
 
     def _needed_tiles_args(self) -> tuple:
@@ -437,10 +468,21 @@ class MipTiles:
         return (float(cols), float(rows), self.sizes, self.tile_shift, self.tile, self.grids,
                 self.offsets, self.filled, self.need, self._queue)
 
+    @property
+    def n_filled(self) -> int:
+        """How many tiles are filled."""
+        return int(self._n_written[0])
+
+    @property
+    def complete(self) -> bool:
+        """Everything filled, walls too: nothing left to check (False once retired)."""
+        return self._walls_complete and self._n_written[0] == len(self.filled)
+
     def __getstate__(self) -> dict[str, object]:
         state = self.__dict__.copy()
         del state["_queue"]  # scratch (≈ 1 MB of garbage): a copy makes its own
         del state["_need_args"]  # views of the state's arrays: a copy makes its own
+        state["_fill_args"] = None  # the same
         return state
 
     def __setstate__(self, state: dict[str, object]) -> None:
@@ -452,14 +494,32 @@ class MipTiles:
         self._level0_tiles = int(self.grids[0, 0] * self.grids[0, 1])  # pickled before it
         if "nonzero_rows" not in state:  # pickled before the row masks: every row may
             self.nonzero_rows = np.full(len(self.filled), -1, np.int64)  # be non-zero
-        if "n_filled" not in state:  # pickled before the fill lists
-            self.n_filled = int(np.count_nonzero(self.filled))
-            self._written_runs = [np.flatnonzero(self.filled)]
-            self.retired = False
+        if "_written" not in state:  # pickled before the fill log
+            self._log_from_before(state)
+        self._fill_args = None
         if self.level0_in_atlas:
             g, (rows, cols) = ATLAS_GUARD, self.marking.shape
             self.marking.intensity = self.atlas[g:g + rows, g:g + cols]
         self._need_args = self._needed_tiles_args()
+
+    def _log_from_before(self, state: dict[str, object]) -> None:
+        """The fill log of a scene pickled with a list of fills (``_written_runs``, which
+        may list a tile twice, or one an interrupted fill listed and left unfilled), or
+        before that with none: the filled tiles (the log counts them); the others listed
+        kept apart for ``retire`` to zero too."""
+        for name in ("n_filled", "complete", "_tiles_complete"):
+            self.__dict__.pop(name, None)
+        runs = self.__dict__.pop("_written_runs", None)
+        filled = np.flatnonzero(self.filled)
+        listed = np.unique(np.concatenate(runs)) if runs else np.zeros(0, np.int64)
+        extra = np.setdiff1d(listed, filled)
+        self._written = np.empty(len(self.filled), np.int64)
+        self._written[:len(filled)] = filled
+        self._n_written = np.array([len(filled)], np.int64)
+        self._retire_extra = extra.astype(np.int64)  # unfilled, written maybe
+        self._walls_complete = bool(self.wall_filled.all())
+        if "retired" not in state:
+            self.retired = False
 
     def _level0_rows(self) -> np.ndarray:
         """The row masks of level 0: the marking map's if it paints into the atlas (it
@@ -477,14 +537,14 @@ class MipTiles:
         if self.retired:
             return None
         self.retired = True
-        self.complete = self._tiles_complete = False  # the renderer asks ``ensure``: raises
+        self._walls_complete = False  # not complete: the renderer asks ``ensure``: raises
         memory = memory_of(self.atlas)
         if memory is None:
             return None
         # Lists, not scans of ``filled`` (~10⁵ tiles): each fill's tiles; level 0 also
         # holds what a map painting into it painted for other scenes. One call: a kernel
         # call from Python costs µs, and a scene has had ~30 fills.
-        runs = self._written_runs
+        runs = [self._written[:self._n_written[0]], self._retire_extra]
         rows0 = self._level0_rows()
         if self.level0_in_atlas:
             # The map leaves this memory before it is cleared (its list and row marks
@@ -495,9 +555,8 @@ class MipTiles:
             if _last_marking and _last_marking[0] is self.marking:
                 _last_marking.clear()
             self.marking.detach()
-        if runs:
-            _zero_tiles(self.atlas, self.origins, np.concatenate(runs), self.sizes,
-                        self.tile, self.grids, self.offsets, rows0, self.nonzero_rows)
+        _zero_tiles(self.atlas, self.origins, np.concatenate(runs), self.sizes,
+                    self.tile, self.grids, self.offsets, rows0, self.nonzero_rows)
         (wx, wy), width = self.wall_origin, self.wall.shape[1] + 1  # + the wrap column
         for r in np.flatnonzero(self.wall_filled):
             self.atlas[wy + r, wx:wx + width] = 0
@@ -521,22 +580,43 @@ class MipTiles:
     @property
     def need_args(self) -> tuple:
         """``_needed_tiles``' arguments after the view's, for a kernel that checks a view
-        itself (``Renderer``'s ``_render_lean``, run by ``run_view``)."""
+        itself (``Renderer``'s ``_render_lazy``, run by ``run_view``)."""
         self._check_live()
         return self._need_args
 
+    @property
+    def fill_args(self) -> tuple:
+        """``_fill_tiles``' arguments after the count, for a kernel that fills what it
+        listed itself (``Renderer``'s ``_render_lazy``): the same tuple while the marking
+        map's memory stays (its ``paint_args``)."""
+        self._check_live()
+        paint = self.marking.paint_args
+        if self._fill_args is None or self._fill_args[3] is not paint:
+            self._fill_args = self._make_fill_args(paint)
+        return self._fill_args
+
+    def _make_fill_args(self, paint: tuple) -> tuple:
+        use_wear = self._worn is not None
+        if use_wear and self._remaining is None:
+            self._remaining = _wear_remaining(self._worn, self.marking.shape)
+        remaining = self._remaining if use_wear else _NO_WEAR
+        # The marking map's intensity: ``paint``'s own (the array it paints into).
+        intensity = paint[4]
+        return (self._queue, self._written, self._n_written, paint, self.level0_in_atlas,
+                self.atlas, ATLAS_GUARD, intensity, remaining, use_wear, self._level0_tiles,
+                int(self.grids[0, 1]), int(self.tile[0]), self.marking.nonzero_rows,
+                self.nonzero_rows, self._level0_rows(), self.origins, self.sizes, self.tile,
+                self.grids, self.offsets, self.filled, self.need)
+
     def run_view(self, kernel: Callable[..., int], args: tuple) -> int:
         """``kernel(*args)``, a kernel that lists the tiles a view still needs with
-        ``_needed_tiles`` (its ``need_args``) and returns how many, before it reads any;
-        those are filled here. Returns that count (0: the kernel went on and read)."""
+        ``_needed_tiles`` (its ``need_args``) and fills them with ``_fill_tiles`` (its
+        ``fill_args``) before it reads any. Returns what the kernel returns."""
         try:
-            n = kernel(*args)
-            if n > 0:
-                self._fill(n)
+            return kernel(*args)
         except BaseException:
             self.need[:] = 0  # as ``ensure``: no tile may stay listed between calls
             raise
-        return n
 
     def ensure_walls(self, lo: float, hi: float) -> None:
         """Copy in the wall texture rows that bilinear taps of rows ``lo … hi`` [texels]
@@ -554,7 +634,7 @@ class MipTiles:
         self.atlas[wy + r0:wy + r1, wx:wx + wall.shape[1]] = wall[r0:r1]
         self.atlas[wy + r0:wy + r1, wx + wall.shape[1]] = wall[r0:r1, 0]  # wraps (_atlas)
         self.wall_filled[r0:r1] = True
-        self.complete = self._tiles_complete and bool(self.wall_filled.all())
+        self._walls_complete = bool(self.wall_filled.all())
 
     def fill_all(self) -> None:
         self._check_live()
@@ -572,42 +652,8 @@ class MipTiles:
 
     def _fill(self, n: int) -> None:
         """Fill the ``n`` tiles listed in the queue (marked in ``need``; with those under
-        them, sorted: ``_propagate``)."""
-        queue = self._queue[:n]
-        self._written_runs.append(queue.copy())  # for ``retire``, even if this fails
-        try:
-            self._fill_queued(queue)  # marks them filled, last
-        except BaseException:
-            # The tiles not filled are listed again by the next view that reads them; a
-            # Ctrl-C raised as the last kernel returned finds them filled: counted.
-            self.need[queue] = 0
-            self._count_filled(int(np.count_nonzero(self.filled[queue])))
-            raise
-        self._count_filled(n)
-
-    def _count_filled(self, n: int) -> None:
-        """``n`` more tiles are filled."""
-        self.n_filled += n
-        self._tiles_complete = self.n_filled == len(self.filled)
-        self.complete = self._tiles_complete and bool(self.wall_filled.all())
-
-    def _fill_queued(self, queue: np.ndarray) -> None:
-        """Paint and filter the listed tiles (sorted: level 0 first), then mark them
-        filled."""
-        # Level 0 is numbered first, as the marking map's tiles: the map and the kernels
-        # below pick their tiles from the whole list (no split in Python: µs a frame).
-        self.marking.paint_level0(queue)
-        if not self.level0_in_atlas:
-            use_wear = self._worn is not None
-            if use_wear and self._remaining is None:
-                self._remaining = _wear_remaining(self._worn, self.marking.shape)
-            remaining = self._remaining if use_wear else np.ones((1, 1), np.float32)
-            _store_level0(self.atlas, ATLAS_GUARD, self.marking.intensity, remaining,
-                          use_wear, queue, self._level0_tiles, int(self.grids[0, 1]),
-                          int(self.tile[0]), self.marking.nonzero_rows, self.nonzero_rows)
-        _finish_fill(self.atlas, self.origins, queue, self.sizes, self.tile, self.grids,
-                     self.offsets, self.filled, self.need, self._level0_rows(),
-                     self.nonzero_rows)
+        them, sorted: ``_propagate``): one kernel call (``_fill_tiles``)."""
+        _fill_tiles(n, self.fill_args)
 
 
 def _blobs(rng: np.random.Generator, shape: tuple[int, int], count: int,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -402,40 +403,45 @@ def test_atlas_sampling_equals_opencv_remap() -> None:
 
 
 def test_windows_take_one_kernel_call_where_they_can(renderer: Renderer, monkeypatch) -> None:
-    """The ROIs of a frame without blur, light maps or obstacles in view are rendered by
-    ``_render_lean`` (one call; on a lazy scene a first call lists the tiles the view
-    needs, a second renders), the rest kernel by kernel; either way the crops of the eager
-    scene's full frame."""
+    """The ROIs of a frame without blur, light maps or obstacles in view are rendered in
+    one kernel call: ``_render_lean``, or on a lazy scene ``_render_lazy``, which fills
+    the tiles the view still needs first; the rest kernel by kernel. Either way the crops
+    of the eager scene's full frame."""
     import tfalda_sim.rendering.renderer as module
 
-    real = module._render_lean
-    statuses: list[int] = []
+    statuses: list[str] = []
 
-    def counted(*args: object) -> int:
-        statuses.append(real(*args))
-        return statuses[-1]
+    def counted(name: str) -> Callable[..., int]:
+        real = getattr(module, name)
 
-    monkeypatch.setattr(module, "_render_lean", counted)
+        def call(*args: object) -> int:
+            status = real(*args)
+            statuses.append("lean" if name == "_render_lean" else "walls" if status < 0
+                            else "filled" if status > 0 else "checked")
+            return status
+        return call
+
+    for name in ("_render_lean", "_render_lazy"):
+        monkeypatch.setattr(module, name, counted(name))
     track = generated(3)  # obstacles: views with and without one
     fx = replace(Effects(), motion_blur_s=0.004)  # blurs at speed only
     assert fx.shadows == 0 and fx.glare_spots == 0
     eager = build_scene(track, fx, np.random.default_rng(5), lazy=False)
     lazy = build_scene(track, fx, np.random.default_rng(5))
     clear = lane_pose(track, 2.0)
-    cases = [  # (pose, speed, windows, lean statuses on the lazy scene, on the eager one)
-        (clear, 0.0, ROIS, "listed, rendered", "rendered"),
-        (clear, 0.0, ROIS, "rendered", "rendered"),  # filled now: no listing
+    cases = [  # (pose, speed, windows, kernels on the lazy scene, on the eager one)
+        (clear, 0.0, ROIS, "filled", "lean"),
+        (clear, 0.0, ROIS, "checked", "lean"),  # filled now: nothing to fill
         (clear, 2.0, ROIS, "", ""),  # motion blur
         (lane_pose(track, track.obstacles[0].s_m - 0.9), 0.0, ROIS, "", ""),  # a carton
-        (clear, 0.0, [(100, 0, 600, 40)], "walls", "rendered"),  # wall rows not copied yet
+        (clear, 0.0, [(100, 0, 600, 40)], "walls", "lean"),  # wall rows not copied yet
     ]
     for k, (pose, speed, wins, on_lazy, on_eager) in enumerate(cases):
         full = renderer.render(eager, pose, speed_m_s=speed, frame_seed=k)
         for scene, expected in ((lazy, on_lazy), (eager, on_eager)):
             statuses.clear()
             parts = renderer.render_windows(scene, pose, wins, speed_m_s=speed, frame_seed=k)
-            named = ["rendered" if s == 0 else "walls" if s < 0 else "listed" for s in statuses]
-            assert ", ".join(named) == expected, (k, scene is lazy)
+            assert ", ".join(statuses) == expected, (k, scene is lazy)
             for (x, y, w, h), part in zip(wins, parts, strict=True):
                 assert np.array_equal(part, full[y:y + h, x:x + w]), (k, scene is lazy)
     # light maps (shadows): kernel by kernel

@@ -440,7 +440,7 @@ def test_a_map_on_its_own_memory_paints_with_the_atlas_s_kernels(renderer: Rende
     set cost ≈ 8 s in the middle of the first run after an install)."""
     import pickle
 
-    from tfalda_sim.rendering.scene import _store_level0
+    from tfalda_sim.rendering.renderer import _render_lazy
     from tfalda_sim.tracks.raster import _paint_listed, _raster_kernel, paintable_zeros
 
     own = paintable_zeros((5, 7))
@@ -458,11 +458,16 @@ def test_a_map_on_its_own_memory_paints_with_the_atlas_s_kernels(renderer: Rende
     assert not copy.intensity.flags.c_contiguous
     np.testing.assert_array_equal(copy.intensity, marking.intensity)
     copy.fill(np.ones(copy.filled.shape, bool))
-    # Kernels called from Python in this process (others only inside _paint_listed).
-    assert _paint_listed.signatures and _store_level0.signatures
-    for kernel, arg in ((_paint_listed, 5), (_raster_kernel, 0), (_store_level0, 2)):
+    # Kernels called from Python in this process (others only inside them): the
+    # intensity as _paint_listed's argument, and in the fill tuple of _render_lazy (the
+    # one it paints into, and the one _store_level0 copies from).
+    assert _paint_listed.signatures and _render_lazy.signatures
+    for kernel, arg in ((_paint_listed, 5), (_raster_kernel, 0)):
         layouts = {str(signature[arg]) for signature in kernel.signatures}
         assert layouts <= {"array(uint8, 2d, A)"}, (kernel.__name__, layouts)
+    fills = [signature[7] for signature in _render_lazy.signatures]
+    layouts = {str(t) for fill in fills for t in (fill.types[3].types[4], fill.types[7])}
+    assert layouts == {"array(uint8, 2d, A)"}, layouts
 
 
 def test_a_fill_that_fails_is_filled_by_the_next_view(renderer: Renderer, monkeypatch) -> None:
@@ -494,31 +499,34 @@ def test_a_fill_that_fails_is_filled_by_the_next_view(renderer: Renderer, monkey
 
 
 FULL_FRAME = [(0, 0, 752, 480)]
-"""A full frame: rendered kernel by kernel (``Scene.prepare`` fills), where the ROIs take
-``_render_lean``, which lists the tiles itself."""
+"""A full frame: rendered kernel by kernel (``Scene.prepare`` lists the tiles, then
+``_fill_tiles`` fills them), where the ROIs take ``_render_lazy``, which lists and fills
+them itself."""
+
+KERNELS_CALLED_FROM_PYTHON = [("_needed_tiles", FULL_FRAME), ("_fill_tiles", FULL_FRAME),
+                              ("_render_lazy", ROIS)]
+"""Where a lazy scene's kernels return to Python (where a Ctrl-C can land), and the
+windows that take that path."""
 
 
-@pytest.mark.parametrize(("where", "windows"), [
-    ("_needed_tiles", FULL_FRAME), ("_render_lean", ROIS), ("_paint_listed", ROIS),
-    ("_finish_fill", ROIS), ("_paint_listed", FULL_FRAME)])
+@pytest.mark.parametrize(("where", "windows"), KERNELS_CALLED_FROM_PYTHON)
 def test_a_ctrl_c_as_a_fill_kernel_returns_leaves_consistent_state(
         renderer: Renderer, monkeypatch, where: str, windows: list) -> None:
     """A Ctrl-C is raised when the kernel running at that moment returns, after it
-    changed the arrays: after listing the needed tiles (``_needed_tiles`` for a frame
-    rendered kernel by kernel, ``_render_lean`` for windows), after painting level 0,
-    after the mips marked them filled. In each case nothing stays marked needed (or those
-    tiles would never be listed again), the filled count matches ``filled`` (or the scene
-    would never count as complete), every tile painted into the atlas is on the list a
-    retiring scene zeroes, and the next view renders the eager frames."""
+    changed the arrays: after listing the needed tiles (``_needed_tiles``, a frame
+    rendered kernel by kernel), after filling them (``_fill_tiles``), after filling and
+    rendering windows in one call (``_render_lazy``). In each case nothing stays marked
+    needed (or those tiles would never be listed again), the filled count matches
+    ``filled`` (or the scene would never count as complete), every tile filled or
+    painted into the atlas is on the lists a retiring scene zeroes, and the next view
+    renders the eager frames."""
     import tfalda_sim.rendering.renderer as renderer_module
     import tfalda_sim.rendering.scene as scene_module
-    import tfalda_sim.tracks.raster as raster_module
 
     track = replace(generated(8), name=f"interrupted at {where}")
     lazy = build_scene(track, Effects(), np.random.default_rng(4))
     eager = build_scene(track, Effects(), np.random.default_rng(4), lazy=False)
-    module = {"_paint_listed": raster_module, "_render_lean": renderer_module}.get(
-        where, scene_module)
+    module = renderer_module if where == "_render_lazy" else scene_module
     real = getattr(module, where)
     calls = []
 
@@ -533,11 +541,12 @@ def test_a_ctrl_c_as_a_fill_kernel_returns_leaves_consistent_state(
     pose = _poses(track, 1, 8)[0]
     with pytest.raises(KeyboardInterrupt):
         renderer.render_windows(lazy, pose, windows)
-    listing_only = where in ("_needed_tiles", "_render_lean")
+    listing_only = where == "_needed_tiles"
     t = lazy.tiles
     assert not t.need.any()
     assert t.n_filled == np.count_nonzero(t.filled)
-    assert (t.n_filled > 0) == (where == "_finish_fill")
+    assert (t.n_filled > 0) == (not listing_only)
+    assert set(np.flatnonzero(t.filled).tolist()) == set(t._written[:t.n_filled].tolist())
     # The marking map's own list (what a scene sharing the map zeroes when it retires).
     painted = np.flatnonzero(t.marking.filled)
     assert (len(painted) > 0) == (not listing_only)
@@ -589,23 +598,21 @@ def test_row_masks_of_every_level_cover_its_non_zero_rows(renderer: Renderer,
     assert unmarked > marked  # most rows need neither a read nor a clear
 
 
-@pytest.mark.parametrize(("where", "kind"), [
-    ("_paint_listed", "default"), ("_paint_listed", "randomised"),
-    ("_store_level0", "randomised"),  # a scene with wear copies level 0 in
-    ("_finish_fill", "default"), ("_finish_fill", "randomised")])
+@pytest.mark.parametrize("kind", ["default", "worn"])  # worn: level 0 copied in
+@pytest.mark.parametrize(("where", "windows"), KERNELS_CALLED_FROM_PYTHON[1:])
 def test_a_scene_interrupted_in_a_fill_retires_to_all_zero_memory(
-        renderer: Renderer, monkeypatch, where: str, kind: str) -> None:
-    """A Ctrl-C raised as a fill kernel returns (level 0 painted or copied in, the mips
-    not yet made, or all done): the scene, retired, still hands over all-zero memory (the
-    rows painted are marked before the next kernel runs)."""
+        renderer: Renderer, monkeypatch, where: str, windows: list, kind: str) -> None:
+    """A Ctrl-C raised as a fill kernel returns (the tiles listed, painted or copied in,
+    the mips made, maybe the windows rendered too): the scene, retired, still hands over
+    all-zero memory (every tile written is on its list)."""
+    import tfalda_sim.rendering.renderer as renderer_module
     import tfalda_sim.rendering.scene as scene_module
-    import tfalda_sim.tracks.raster as raster_module
 
     track = replace(generated(15), name=f"interrupted {where} {kind}")
-    fx, scene_seed = _effects(kind, 15)
+    fx, scene_seed = (replace(Effects(), wear=0.4), 15) if kind == "worn" else (Effects(), 0)
     lazy = build_scene(track, fx, np.random.default_rng(scene_seed))
     renderer.render_windows(lazy, _poses(track, 1, 1)[0], ROIS)  # some tiles filled first
-    module = raster_module if where == "_paint_listed" else scene_module
+    module = renderer_module if where == "_render_lazy" else scene_module
     real = getattr(module, where)
 
     def interrupted(*args: Any) -> Any:
@@ -614,7 +621,7 @@ def test_a_scene_interrupted_in_a_fill_retires_to_all_zero_memory(
 
     monkeypatch.setattr(module, where, interrupted)
     with pytest.raises(KeyboardInterrupt):
-        renderer.render_windows(lazy, _poses(track, 1, 2)[0], ROIS)
+        renderer.render_windows(lazy, _poses(track, 1, 2)[0], windows)
     monkeypatch.setattr(module, where, real)
     memory = memory_of(lazy.atlas)
     assert memory is not None and np.frombuffer(memory, np.uint8).any()
@@ -647,6 +654,48 @@ def test_a_scene_pickled_before_the_row_masks_renders_the_eager_frames(
                              renderer.render_windows(eager, pose, ROIS, frame_seed=k),
                              strict=True):
             np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("layout", ["fill lists", "no lists"])
+def test_a_scene_pickled_before_the_fill_log_renders_and_retires_right(
+        renderer: Renderer, layout: str) -> None:
+    """A lazy scene pickled with the earlier fill bookkeeping (a list of arrays of the
+    tiles each fill listed, a filled count and flags; or before that none of them) loads
+    with a log of its filled tiles, keeps the listed tiles a fill left unfilled (an
+    interrupted one) for ``retire`` to zero, fills what it lacks and renders the eager
+    frames, then counts as complete once all is filled."""
+    import pickle
+
+    track = replace(generated(18), name=f"pickled with {layout}")
+    lazy = build_scene(track, Effects.off())
+    eager = build_scene(track, Effects.off(), lazy=False)
+    poses = _poses(track, 4, 18)
+    renderer.render_windows(lazy, poses[0], ROIS)
+    twin = pickle.loads(pickle.dumps(lazy))
+    t = twin.tiles
+    filled = np.flatnonzero(t.filled)
+    unfilled = np.flatnonzero(t.filled == 0)[:3]  # listed by a fill that was interrupted
+    state = t.__dict__.copy()
+    for name in ("_written", "_n_written", "_retire_extra", "_fill_args", "_walls_complete"):
+        del state[name]
+    if layout == "fill lists":
+        state.update(n_filled=len(filled), complete=False, _tiles_complete=False,
+                     _written_runs=[filled[:5], filled, unfilled])
+    t.__dict__.clear()
+    MipTiles.__setstate__(t, state)
+    assert t.n_filled == len(filled) and not t.complete
+    assert sorted(t._written[:t.n_filled].tolist()) == filled.tolist()
+    expected_extra = unfilled.tolist() if layout == "fill lists" else []
+    assert t._retire_extra.tolist() == expected_extra
+    for k, pose in enumerate(poses[1:]):
+        for got, want in zip(renderer.render_windows(twin, pose, ROIS, frame_seed=k),
+                             renderer.render_windows(eager, pose, ROIS, frame_seed=k),
+                             strict=True):
+            np.testing.assert_array_equal(got, want)
+    assert t.n_filled == np.count_nonzero(t.filled) > len(filled)
+    twin.fill_all()
+    assert t.complete
+    np.testing.assert_array_equal(twin.atlas, eager.atlas)
 
 
 @pytest.mark.parametrize("where", ["_zero_tiles", "detach"])
