@@ -586,9 +586,9 @@ class MipTiles:
 
     @property
     def fill_args(self) -> tuple:
-        """``_fill_tiles``' arguments after the count, for a kernel that fills what it
-        listed itself (``Renderer``'s ``_render_lazy``): the same tuple while the marking
-        map's memory stays (its ``paint_args``)."""
+        """``_fill_tiles``' arguments after the count, for a kernel that fills tiles
+        itself (``Renderer``'s ``_fill_render``, run by ``run_view``): the same tuple while
+        the marking map's memory stays (its ``paint_args``)."""
         self._check_live()
         paint = self.marking.paint_args
         if self._fill_args is None or self._fill_args[3] is not paint:
@@ -608,15 +608,21 @@ class MipTiles:
                 self.nonzero_rows, self._level0_rows(), self.origins, self.sizes, self.tile,
                 self.grids, self.offsets, self.filled, self.need)
 
-    def run_view(self, kernel: Callable[..., int], args: tuple) -> int:
-        """``kernel(*args)``, a kernel that lists the tiles a view still needs with
-        ``_needed_tiles`` (its ``need_args``) and fills them with ``_fill_tiles`` (its
-        ``fill_args``) before it reads any. Returns what the kernel returns."""
+    def run_view(self, check: Callable[..., int], check_args: tuple,
+                 fill_then: Callable[..., int], then_args: tuple) -> int:
+        """``check(*check_args)``, a kernel that lists the tiles a view still needs with
+        ``_needed_tiles`` (its ``need_args``) and returns how many, n, before it reads
+        any (else it goes on, and returns 0, or −1 for walls to copy in first); if n > 0,
+        ``fill_then(n, fill_args, *then_args)``, a kernel that fills them with
+        ``_fill_tiles`` and goes on. Returns n."""
         try:
-            return kernel(*args)
+            n = check(*check_args)
+            if n > 0:
+                fill_then(n, self.fill_args, *then_args)
         except BaseException:
             self.need[:] = 0  # as ``ensure``: no tile may stay listed between calls
             raise
+        return n
 
     def ensure_walls(self, lo: float, hi: float) -> None:
         """Copy in the wall texture rows that bilinear taps of rows ``lo … hi`` [texels]

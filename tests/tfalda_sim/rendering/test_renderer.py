@@ -404,9 +404,10 @@ def test_atlas_sampling_equals_opencv_remap() -> None:
 
 def test_windows_take_one_kernel_call_where_they_can(renderer: Renderer, monkeypatch) -> None:
     """The ROIs of a frame without blur, light maps or obstacles in view are rendered in
-    one kernel call: ``_render_lean``, or on a lazy scene ``_render_lazy``, which fills
-    the tiles the view still needs first; the rest kernel by kernel. Either way the crops
-    of the eager scene's full frame."""
+    one kernel call: ``_render_lean``, or on a lazy scene ``_render_lazy``, which checks
+    that the view's tiles are filled (if not, it lists them and ``_fill_render`` fills
+    and renders: two calls); the rest kernel by kernel. Either way the crops of the eager
+    scene's full frame."""
     import tfalda_sim.rendering.renderer as module
 
     statuses: list[str] = []
@@ -416,12 +417,12 @@ def test_windows_take_one_kernel_call_where_they_can(renderer: Renderer, monkeyp
 
         def call(*args: object) -> int:
             status = real(*args)
-            statuses.append("lean" if name == "_render_lean" else "walls" if status < 0
-                            else "filled" if status > 0 else "checked")
+            statuses.append({"_render_lean": "lean", "_fill_render": "filled"}.get(name) or (
+                "walls" if status < 0 else "listed" if status > 0 else "rendered"))
             return status
         return call
 
-    for name in ("_render_lean", "_render_lazy"):
+    for name in ("_render_lean", "_render_lazy", "_fill_render"):
         monkeypatch.setattr(module, name, counted(name))
     track = generated(3)  # obstacles: views with and without one
     fx = replace(Effects(), motion_blur_s=0.004)  # blurs at speed only
@@ -430,8 +431,8 @@ def test_windows_take_one_kernel_call_where_they_can(renderer: Renderer, monkeyp
     lazy = build_scene(track, fx, np.random.default_rng(5))
     clear = lane_pose(track, 2.0)
     cases = [  # (pose, speed, windows, kernels on the lazy scene, on the eager one)
-        (clear, 0.0, ROIS, "filled", "lean"),
-        (clear, 0.0, ROIS, "checked", "lean"),  # filled now: nothing to fill
+        (clear, 0.0, ROIS, "listed, filled", "lean"),
+        (clear, 0.0, ROIS, "rendered", "lean"),  # filled now: nothing to fill
         (clear, 2.0, ROIS, "", ""),  # motion blur
         (lane_pose(track, track.obstacles[0].s_m - 0.9), 0.0, ROIS, "", ""),  # a carton
         (clear, 0.0, [(100, 0, 600, 40)], "walls", "lean"),  # wall rows not copied yet

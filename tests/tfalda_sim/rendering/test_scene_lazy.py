@@ -440,7 +440,7 @@ def test_a_map_on_its_own_memory_paints_with_the_atlas_s_kernels(renderer: Rende
     set cost ≈ 8 s in the middle of the first run after an install)."""
     import pickle
 
-    from tfalda_sim.rendering.renderer import _render_lazy
+    from tfalda_sim.rendering.renderer import _fill_render
     from tfalda_sim.tracks.raster import _paint_listed, _raster_kernel, paintable_zeros
 
     own = paintable_zeros((5, 7))
@@ -459,13 +459,13 @@ def test_a_map_on_its_own_memory_paints_with_the_atlas_s_kernels(renderer: Rende
     np.testing.assert_array_equal(copy.intensity, marking.intensity)
     copy.fill(np.ones(copy.filled.shape, bool))
     # Kernels called from Python in this process (others only inside them): the
-    # intensity as _paint_listed's argument, and in the fill tuple of _render_lazy (the
+    # intensity as _paint_listed's argument, and in the fill tuple of _fill_render (the
     # one it paints into, and the one _store_level0 copies from).
-    assert _paint_listed.signatures and _render_lazy.signatures
+    assert _paint_listed.signatures and _fill_render.signatures
     for kernel, arg in ((_paint_listed, 5), (_raster_kernel, 0)):
         layouts = {str(signature[arg]) for signature in kernel.signatures}
         assert layouts <= {"array(uint8, 2d, A)"}, (kernel.__name__, layouts)
-    fills = [signature[7] for signature in _render_lazy.signatures]
+    fills = [signature[1] for signature in _fill_render.signatures]
     layouts = {str(t) for fill in fills for t in (fill.types[3].types[4], fill.types[7])}
     assert layouts == {"array(uint8, 2d, A)"}, layouts
 
@@ -500,11 +500,11 @@ def test_a_fill_that_fails_is_filled_by_the_next_view(renderer: Renderer, monkey
 
 FULL_FRAME = [(0, 0, 752, 480)]
 """A full frame: rendered kernel by kernel (``Scene.prepare`` lists the tiles, then
-``_fill_tiles`` fills them), where the ROIs take ``_render_lazy``, which lists and fills
-them itself."""
+``_fill_tiles`` fills them), where the ROIs take ``_render_lazy``, which lists them
+itself, then ``_fill_render``, which fills them and renders."""
 
-KERNELS_CALLED_FROM_PYTHON = [("_needed_tiles", FULL_FRAME), ("_fill_tiles", FULL_FRAME),
-                              ("_render_lazy", ROIS)]
+KERNELS_CALLED_FROM_PYTHON = [("_needed_tiles", FULL_FRAME), ("_render_lazy", ROIS),
+                              ("_fill_tiles", FULL_FRAME), ("_fill_render", ROIS)]
 """Where a lazy scene's kernels return to Python (where a Ctrl-C can land), and the
 windows that take that path."""
 
@@ -513,20 +513,20 @@ windows that take that path."""
 def test_a_ctrl_c_as_a_fill_kernel_returns_leaves_consistent_state(
         renderer: Renderer, monkeypatch, where: str, windows: list) -> None:
     """A Ctrl-C is raised when the kernel running at that moment returns, after it
-    changed the arrays: after listing the needed tiles (``_needed_tiles``, a frame
-    rendered kernel by kernel), after filling them (``_fill_tiles``), after filling and
-    rendering windows in one call (``_render_lazy``). In each case nothing stays marked
-    needed (or those tiles would never be listed again), the filled count matches
-    ``filled`` (or the scene would never count as complete), every tile filled or
-    painted into the atlas is on the lists a retiring scene zeroes, and the next view
-    renders the eager frames."""
+    changed the arrays: after listing the needed tiles (``_needed_tiles`` for a frame
+    rendered kernel by kernel, ``_render_lazy`` for windows), after filling them
+    (``_fill_tiles``; ``_fill_render``, which renders the windows too). In each case
+    nothing stays marked needed (or those tiles would never be listed again), the filled
+    count matches ``filled`` (or the scene would never count as complete), every tile
+    filled or painted into the atlas is on the lists a retiring scene zeroes, and the
+    next view renders the eager frames."""
     import tfalda_sim.rendering.renderer as renderer_module
     import tfalda_sim.rendering.scene as scene_module
 
     track = replace(generated(8), name=f"interrupted at {where}")
     lazy = build_scene(track, Effects(), np.random.default_rng(4))
     eager = build_scene(track, Effects(), np.random.default_rng(4), lazy=False)
-    module = renderer_module if where == "_render_lazy" else scene_module
+    module = scene_module if where in ("_needed_tiles", "_fill_tiles") else renderer_module
     real = getattr(module, where)
     calls = []
 
@@ -541,7 +541,7 @@ def test_a_ctrl_c_as_a_fill_kernel_returns_leaves_consistent_state(
     pose = _poses(track, 1, 8)[0]
     with pytest.raises(KeyboardInterrupt):
         renderer.render_windows(lazy, pose, windows)
-    listing_only = where == "_needed_tiles"
+    listing_only = where in ("_needed_tiles", "_render_lazy")
     t = lazy.tiles
     assert not t.need.any()
     assert t.n_filled == np.count_nonzero(t.filled)
@@ -599,7 +599,7 @@ def test_row_masks_of_every_level_cover_its_non_zero_rows(renderer: Renderer,
 
 
 @pytest.mark.parametrize("kind", ["default", "worn"])  # worn: level 0 copied in
-@pytest.mark.parametrize(("where", "windows"), KERNELS_CALLED_FROM_PYTHON[1:])
+@pytest.mark.parametrize(("where", "windows"), KERNELS_CALLED_FROM_PYTHON[2:])
 def test_a_scene_interrupted_in_a_fill_retires_to_all_zero_memory(
         renderer: Renderer, monkeypatch, where: str, windows: list, kind: str) -> None:
     """A Ctrl-C raised as a fill kernel returns (the tiles listed, painted or copied in,
@@ -612,7 +612,7 @@ def test_a_scene_interrupted_in_a_fill_retires_to_all_zero_memory(
     fx, scene_seed = (replace(Effects(), wear=0.4), 15) if kind == "worn" else (Effects(), 0)
     lazy = build_scene(track, fx, np.random.default_rng(scene_seed))
     renderer.render_windows(lazy, _poses(track, 1, 1)[0], ROIS)  # some tiles filled first
-    module = renderer_module if where == "_render_lazy" else scene_module
+    module = renderer_module if where == "_fill_render" else scene_module
     real = getattr(module, where)
 
     def interrupted(*args: Any) -> Any:
