@@ -483,6 +483,7 @@ class MipTiles:
         del state["_queue"]  # scratch (≈ 1 MB of garbage): a copy makes its own
         del state["_need_args"]  # views of the state's arrays: a copy makes its own
         state["_fill_args"] = None  # the same
+        state["_written"] = self._written[:self._n_written[0]].copy()  # not its spare room
         return state
 
     def __setstate__(self, state: dict[str, object]) -> None:
@@ -496,6 +497,10 @@ class MipTiles:
             self.nonzero_rows = np.full(len(self.filled), -1, np.int64)  # be non-zero
         if "_written" not in state:  # pickled before the fill log
             self._log_from_before(state)
+        elif len(self._written) < len(self.filled):  # pickled without its spare room
+            written = np.empty(len(self.filled), np.int64)
+            written[:len(self._written)] = self._written
+            self._written = written
         self._fill_args = None
         if self.level0_in_atlas:
             g, (rows, cols) = ATLAS_GUARD, self.marking.shape

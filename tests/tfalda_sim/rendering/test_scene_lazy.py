@@ -656,6 +656,35 @@ def test_a_scene_pickled_before_the_row_masks_renders_the_eager_frames(
             np.testing.assert_array_equal(got, want)
 
 
+def test_a_pickled_lazy_scene_keeps_its_fill_log_without_its_spare_room(
+        renderer: Renderer) -> None:
+    """A lazy scene's pickle holds the tiles it filled, not the log's room for every tile
+    of the map (≈ 8 bytes a tile, ~10⁵ tiles); the copy gets that room back, fills on
+    and renders the eager frames."""
+    import pickle
+
+    track = replace(generated(19), name="pickled fill log")
+    lazy = build_scene(track, Effects.off())
+    eager = build_scene(track, Effects.off(), lazy=False)
+    poses = _poses(track, 4, 19)
+    renderer.render_windows(lazy, poses[0], ROIS)
+    t = lazy.tiles
+    n = t.n_filled
+    assert 0 < n < len(t.filled) // 10
+    assert len(t._written) == len(t.filled)  # room for every tile of the map
+    np.testing.assert_array_equal(t.__getstate__()["_written"], t._written[:n])
+    twin = pickle.loads(pickle.dumps(lazy))
+    assert len(twin.tiles._written) == len(twin.tiles.filled)
+    assert twin.tiles.n_filled == n
+    np.testing.assert_array_equal(twin.tiles._written[:n], t._written[:n])
+    for k, pose in enumerate(poses[1:]):
+        for got, want in zip(renderer.render_windows(twin, pose, ROIS, frame_seed=k),
+                             renderer.render_windows(eager, pose, ROIS, frame_seed=k),
+                             strict=True):
+            np.testing.assert_array_equal(got, want)
+    assert twin.tiles.n_filled == np.count_nonzero(twin.tiles.filled) > n
+
+
 @pytest.mark.parametrize("layout", ["fill lists", "no lists"])
 def test_a_scene_pickled_before_the_fill_log_renders_and_retires_right(
         renderer: Renderer, layout: str) -> None:
