@@ -580,19 +580,14 @@ def _render_lean(out: np.ndarray, tex: np.ndarray, boxes: np.ndarray, cuts: np.n
 @njit(cache=True, error_model="numpy")
 def _render_lazy(block_start: np.ndarray, block_bounds: np.ndarray, block_walls: np.ndarray,
                  block: int, block_cols: int, need_args: tuple, wall_filled: np.ndarray,
-                 out: np.ndarray, tex: np.ndarray, boxes: np.ndarray, cuts: np.ndarray,
-                 seg_reads: np.ndarray, seg_code: np.ndarray, seg_flags: np.ndarray,
-                 pack: int, atlas: np.ndarray, coord_a: np.ndarray, coord_b: np.ndarray,
-                 wall_row: np.ndarray, piece_table: np.ndarray, levels: int, wall_y: float,
-                 affine: np.ndarray, size_x: float, size_y: float, wall_shift: float,
-                 wall_cols: float, gain: np.ndarray, sheen: np.ndarray, noise: np.ndarray,
-                 noise_offset: int, image_width: int, params: np.ndarray) -> int:
-    """``_render_lean`` on a lazy scene, after the check that everything the view reads
-    is filled (``_view_bounds``, ``_needed_tiles`` with the scene's ``need_args``, the
-    wall rows in ``wall_filled``), in one call. Returns 0 when rendered; n > 0: nothing
-    done but the n tiles listed by ``_needed_tiles``, to be filled first
-    (``_fill_render``); −1: wall rows must be copied in first
+                 view: tuple) -> int:
+    """``_render_lean(*view)`` on a lazy scene, after the check that everything the view
+    reads is filled (``_view_bounds`` of its windows, ``_needed_tiles`` with the scene's
+    ``need_args``, the wall rows in ``wall_filled``), in one call. Returns 0 when
+    rendered; n > 0: nothing done but the n tiles listed by ``_needed_tiles``, to be
+    filled first (``_fill_render``); −1: wall rows must be copied in first
     (``MipTiles.ensure_walls``), nothing listed."""
+    boxes, affine = view[2], view[15]
     bounds, wall_lo, wall_hi = _view_bounds(boxes, block_start, block_bounds, block_walls,
                                             block, block_cols)
     if wall_lo <= wall_hi:
@@ -606,31 +601,17 @@ def _render_lazy(block_start: np.ndarray, block_bounds: np.ndarray, block_walls:
     n = _needed_tiles(bounds, affine.reshape(1, 6), *need_args)
     if n:
         return n
-    return _render_lean(out, tex, boxes, cuts, seg_reads, seg_code, seg_flags, pack, atlas,
-                        coord_a, coord_b, wall_row, piece_table, levels, wall_y, affine,
-                        size_x, size_y, wall_shift, wall_cols, gain, sheen, noise,
-                        noise_offset, image_width, params)
+    return _render_lean(*view)
 
 
 @njit(cache=True, error_model="numpy")
-def _fill_render(n: int, fill: tuple, out: np.ndarray, tex: np.ndarray, boxes: np.ndarray,
-                 cuts: np.ndarray, seg_reads: np.ndarray, seg_code: np.ndarray,
-                 seg_flags: np.ndarray, pack: int, atlas: np.ndarray, coord_a: np.ndarray,
-                 coord_b: np.ndarray, wall_row: np.ndarray, piece_table: np.ndarray,
-                 levels: int, wall_y: float, affine: np.ndarray, size_x: float,
-                 size_y: float, wall_shift: float, wall_cols: float, gain: np.ndarray,
-                 sheen: np.ndarray, noise: np.ndarray, noise_offset: int, image_width: int,
-                 params: np.ndarray) -> int:
+def _fill_render(n: int, fill: tuple, view: tuple) -> int:
     """What ``_render_lazy`` listed (``n`` tiles) filled by ``_fill_tiles`` (``fill``: the
-    scene's ``fill_args``), then ``_render_lean``, in one call (a new generated track
-    fills tiles on most steps: the three kernel calls this replaces and the Python
-    between them cost ≈ 15–30 µs a step). Only here: the fill's ≈ 50 arguments cost µs
-    to pass, which a step with nothing to fill does not pay. Returns 0."""
+    scene's ``fill_args``), then ``_render_lean(*view)``, in one call instead of three
+    with Python between them. Only here: the fill's ≈ 50 arguments cost µs to pass
+    (≈ 0.1 µs each), which a step that fills nothing does not pay. Returns 0."""
     _fill_tiles(n, fill)
-    return _render_lean(out, tex, boxes, cuts, seg_reads, seg_code, seg_flags, pack, atlas,
-                        coord_a, coord_b, wall_row, piece_table, levels, wall_y, affine,
-                        size_x, size_y, wall_shift, wall_cols, gain, sheen, noise,
-                        noise_offset, image_width, params)
+    return _render_lean(*view)
 
 
 _PACK = 1024
@@ -963,8 +944,8 @@ class Renderer:
             _render_lean(*args)
         elif tiles.run_view(_render_lazy, (px.block_start, px.block_bounds, px.block_walls,
                                            FOOTPRINT_BLOCK_PX, px.block_cols,
-                                           tiles.need_args, tiles.wall_filled, *args),
-                            _fill_render, args) < 0:
+                                           tiles.need_args, tiles.wall_filled, args),
+                            _fill_render, (args,)) < 0:
             return None  # wall rows to copy in: the staged path does that
         return [out[a:b].reshape(shape) for a, b, shape in views]
 
