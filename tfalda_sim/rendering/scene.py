@@ -484,6 +484,7 @@ class MipTiles:
         del state["_need_args"]  # views of the state's arrays: a copy makes its own
         state["_fill_args"] = None  # the same
         state["_written"] = self._written[:self._n_written[0]].copy()  # not its spare room
+        state["_n_written"] = self._n_written.copy()  # a shallow copy's own count
         return state
 
     def __setstate__(self, state: dict[str, object]) -> None:
@@ -522,7 +523,8 @@ class MipTiles:
         self._written[:len(filled)] = filled
         self._n_written = np.array([len(filled)], np.int64)
         self._retire_extra = extra.astype(np.int64)  # unfilled, written maybe
-        self._walls_complete = bool(self.wall_filled.all())
+        # A scene retired before kept its fill marks: never complete (it must not render).
+        self._walls_complete = bool(self.wall_filled.all()) and not state.get("retired")
         if "retired" not in state:
             self.retired = False
 
@@ -574,12 +576,13 @@ class MipTiles:
     def ensure(self, bounds: np.ndarray, affines: np.ndarray) -> None:
         """Fill what a view reads (``Scene.prepare``)."""
         self._check_live()
+        start = int(self._n_written[0])
         try:
             n = _needed_tiles(bounds, affines, *self._need_args)
             if n:
                 self._fill(n)
         except BaseException:
-            self.need[:] = 0  # all 0 between calls: a Ctrl-C must not leave tiles unlisted
+            self._after_error(start)
             raise
 
     @property
@@ -620,14 +623,33 @@ class MipTiles:
         any (else it goes on, and returns 0, or −1 for walls to copy in first); if n > 0,
         ``fill_then(n, fill_args, *then_args)``, a kernel that fills them with
         ``_fill_tiles`` and goes on. Returns n."""
+        start = int(self._n_written[0])
         try:
             n = check(*check_args)
             if n > 0:
                 fill_then(n, self.fill_args, *then_args)
         except BaseException:
-            self.need[:] = 0  # as ``ensure``: no tile may stay listed between calls
+            self._after_error(start)
             raise
         return n
+
+    def _after_error(self, start: int) -> None:
+        """Make the books right after an exception in a view's check or fill (the log was
+        ``start`` tiles long before it). Nothing may stay listed in ``need`` (those tiles
+        would never be listed again). A Ctrl-C lands between kernels, where a fill is done
+        or not begun; an error raised inside the fill kernel (a MemoryError) may leave
+        tiles it logged (and maybe wrote) unfilled: those go to the tiles ``retire`` zeroes
+        besides the log, which keeps only filled tiles (its length is the filled count,
+        and its room one entry a tile)."""
+        self.need[:] = 0
+        end = int(self._n_written[0])
+        if end == start:
+            return
+        logged = self._written[start:end].copy()
+        done = self.filled[logged] != 0
+        self._retire_extra = np.concatenate((self._retire_extra, logged[~done]))
+        self._written[start:start + int(done.sum())] = logged[done]
+        self._n_written[0] = start + int(done.sum())
 
     def ensure_walls(self, lo: float, hi: float) -> None:
         """Copy in the wall texture rows that bilinear taps of rows ``lo … hi`` [texels]
@@ -650,6 +672,7 @@ class MipTiles:
     def fill_all(self) -> None:
         self._check_live()
         todo = np.flatnonzero(self.filled == 0)
+        start = int(self._n_written[0])
         try:
             self.need[todo] = 1
             self._queue[:len(todo)] = todo
@@ -657,7 +680,7 @@ class MipTiles:
                 self._fill(_propagate(self._queue, len(todo), self.need, self.filled,
                                       self.sizes, self.tile, self.grids, self.offsets))
         except BaseException:
-            self.need[:] = 0  # as in ``ensure``
+            self._after_error(start)  # as in ``ensure``
             raise
         self.ensure_walls(0.0, float(self.wall.shape[0]))
 

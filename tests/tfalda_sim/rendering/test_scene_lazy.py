@@ -471,8 +471,9 @@ def test_a_map_on_its_own_memory_paints_with_the_atlas_s_kernels(renderer: Rende
 
 
 def test_a_fill_that_fails_is_filled_by_the_next_view(renderer: Renderer, monkeypatch) -> None:
-    """An error inside a fill (here the worn paint's first use) leaves its tiles unfilled
-    and not marked needed: the next view fills them, and equals the eager frame."""
+    """An error in a fill before its kernel runs (here the worn paint's first use, made
+    with the fill's arguments) leaves its tiles unfilled and not marked needed: the next
+    view fills them, and equals the eager frame."""
     import tfalda_sim.rendering.scene as scene_module
 
     track = replace(generated(6), name="failing fill")
@@ -496,6 +497,51 @@ def test_a_fill_that_fails_is_filled_by_the_next_view(renderer: Renderer, monkey
     for got, want in zip(renderer.render_windows(lazy, pose, ROIS, frame_seed=1),
                          renderer.render_windows(eager, pose, ROIS, frame_seed=1), strict=True):
         np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("path", ["windows", "full frame"])
+def test_an_error_inside_the_fill_kernel_leaves_the_log_counting_filled_tiles(
+        renderer: Renderer, monkeypatch, path: str) -> None:
+    """An exception raised inside the fill kernel (after it logged its tiles, before it
+    marked them filled; here a division by zero from a broken argument, as a MemoryError
+    would be) leaves the log counting only filled tiles (or it would overflow its room,
+    one entry a tile, and count the scene complete too early), nothing marked needed,
+    the tiles it logged on the list ``retire`` zeroes; the next views render the eager
+    frames, and the scene retires to all-zero memory."""
+    track = replace(generated(24), name=f"error inside a fill ({path})")
+    fx = replace(Effects(), wear=0.4)  # level 0 copied in worn by ``_store_level0``
+    lazy = build_scene(track, fx, np.random.default_rng(24))
+    eager = build_scene(track, fx, np.random.default_rng(24), lazy=False)
+    windows = ROIS if path == "windows" else [(0, 0, 752, 480)]
+    real = MipTiles.fill_args.fget
+    calls = []
+
+    def broken_once(self: MipTiles) -> tuple:
+        args = real(self)
+        calls.append(1)
+        if len(calls) == 1:  # ``_store_level0``'s grid columns: divmod by zero
+            return (*args[:11], 0, *args[12:])
+        return args
+
+    monkeypatch.setattr(MipTiles, "fill_args", property(broken_once))
+    poses = _poses(track, 3, 24)
+    with pytest.raises(ZeroDivisionError):
+        renderer.render_windows(lazy, poses[0], windows)
+    t = lazy.tiles
+    assert not t.need.any()
+    assert t.n_filled == np.count_nonzero(t.filled) == 0
+    assert len(t._retire_extra) > 0  # what the failed fill logged, maybe written
+    for k, pose in enumerate(poses):
+        for got, want in zip(renderer.render_windows(lazy, pose, windows, frame_seed=k),
+                             renderer.render_windows(eager, pose, windows, frame_seed=k),
+                             strict=True):
+            np.testing.assert_array_equal(got, want)
+    assert t.n_filled == np.count_nonzero(t.filled) > 0
+    assert sorted(t._written[:t.n_filled].tolist()) == np.flatnonzero(t.filled).tolist()
+    memory = memory_of(lazy.atlas)
+    assert memory is not None and np.frombuffer(memory, np.uint8).any()
+    build_scene(generated(16), Effects(), reuse=lazy)
+    assert not np.frombuffer(memory, np.uint8).any()
 
 
 FULL_FRAME = [(0, 0, 752, 480)]
@@ -685,8 +731,51 @@ def test_a_pickled_lazy_scene_keeps_its_fill_log_without_its_spare_room(
     assert twin.tiles.n_filled == np.count_nonzero(twin.tiles.filled) > n
 
 
+def test_a_retired_scene_pickled_before_the_fill_log_does_not_render(
+        renderer: Renderer) -> None:
+    """A scene retired and pickled with the earlier bookkeeping (its fill marks kept, all
+    filled) loads retired and not complete: rendering it raises the retired scene's
+    error instead of reading its atlas."""
+    import pickle
+
+    track = replace(generated(20), name="retired, pickled before the log")
+    lazy = build_scene(track, Effects.off())
+    lazy.fill_all()
+    twin = pickle.loads(pickle.dumps(lazy))
+    t = twin.tiles
+    state = t.__dict__.copy()
+    for name in ("_written", "_n_written", "_retire_extra", "_fill_args", "_walls_complete"):
+        del state[name]
+    state.update(n_filled=len(t.filled), complete=False, _tiles_complete=False,
+                 _written_runs=[np.flatnonzero(t.filled)], retired=True)
+    t.__dict__.clear()
+    MipTiles.__setstate__(t, state)
+    assert t.retired and t.filled.all() and t.wall_filled.all()
+    assert not t.complete
+    with pytest.raises(RuntimeError, match="retired"):
+        renderer.render_windows(twin, _poses(track, 1, 20)[0], ROIS)
+
+
+def test_a_shallow_copy_of_the_tiles_keeps_its_own_fill_count(renderer: Renderer) -> None:
+    """``copy.copy`` of a scene's tiles gets its own log and its own count of it: fills of
+    the original do not make the copy's log list entries it never held."""
+    import copy
+
+    track = replace(generated(21), name="shallow copy")
+    lazy = build_scene(track, Effects.off())
+    poses = _poses(track, 3, 21)
+    renderer.render_windows(lazy, poses[0], ROIS)
+    t = lazy.tiles
+    twin = copy.copy(t)
+    n = twin.n_filled
+    for pose in poses[1:]:
+        renderer.render_windows(lazy, pose, ROIS)
+    assert t.n_filled > n == twin.n_filled
+    np.testing.assert_array_equal(twin._written[:n], t._written[:n])
+
+
 @pytest.mark.parametrize("layout", ["fill lists", "no lists"])
-def test_a_scene_pickled_before_the_fill_log_renders_and_retires_right(
+def test_a_scene_pickled_before_the_fill_log_renders_and_lists_what_retire_zeroes(
         renderer: Renderer, layout: str) -> None:
     """A lazy scene pickled with the earlier fill bookkeeping (a list of arrays of the
     tiles each fill listed, a filled count and flags; or before that none of them) loads
