@@ -502,30 +502,36 @@ def test_a_fill_that_fails_is_filled_by_the_next_view(renderer: Renderer, monkey
 @pytest.mark.parametrize("path", ["windows", "full frame"])
 def test_an_error_inside_the_fill_kernel_leaves_the_log_counting_filled_tiles(
         renderer: Renderer, monkeypatch, path: str) -> None:
-    """An exception raised inside the fill kernel (after it logged its tiles, before it
-    marked them filled; here a division by zero from a broken argument, as a MemoryError
-    would be) leaves the log counting only filled tiles (or it would overflow its room,
-    one entry a tile, and count the scene complete too early), nothing marked needed,
-    the tiles it logged on the list ``retire`` zeroes; the next views render the eager
-    frames, and the scene retires to all-zero memory."""
+    """An exception raised inside the fill kernel (a MemoryError), after it logged its
+    tiles and before it marked them filled (simulated: the kernel's logging, then the
+    error, in place of the windows' ``_fill_render`` or the full frame's ``_fill_tiles``),
+    leaves the log counting only filled tiles (or it would overflow its room, one entry
+    a tile, and count the scene complete too early), nothing marked needed, the tiles it
+    logged on the list ``retire`` zeroes; the next views render the eager frames, and
+    the scene retires to all-zero memory."""
+    import tfalda_sim.rendering.renderer as renderer_module
+    import tfalda_sim.rendering.scene as scene_module
+
     track = replace(generated(24), name=f"error inside a fill ({path})")
-    fx = replace(Effects(), wear=0.4)  # level 0 copied in worn by ``_store_level0``
+    fx = replace(Effects(), wear=0.4)
     lazy = build_scene(track, fx, np.random.default_rng(24))
     eager = build_scene(track, fx, np.random.default_rng(24), lazy=False)
     windows = ROIS if path == "windows" else [(0, 0, 752, 480)]
-    real = MipTiles.fill_args.fget
-    calls = []
+    module, name = ((renderer_module, "_fill_render") if path == "windows"
+                    else (scene_module, "_fill_tiles"))
+    real = getattr(module, name)
 
-    def broken_once(self: MipTiles) -> tuple:
-        args = real(self)
-        calls.append(1)
-        if len(calls) == 1:  # ``_store_level0``'s grid columns: divmod by zero
-            return (*args[:11], 0, *args[12:])
-        return args
+    def logs_then_fails(n: int, fill: tuple, *rest: Any) -> int:
+        queue, written, n_written = fill[:3]
+        m = int(n_written[0])
+        written[m:m + n] = queue[:n]
+        n_written[0] = m + n
+        monkeypatch.setattr(module, name, real)
+        raise MemoryError("simulated, inside the fill kernel")
 
-    monkeypatch.setattr(MipTiles, "fill_args", property(broken_once))
+    monkeypatch.setattr(module, name, logs_then_fails)
     poses = _poses(track, 3, 24)
-    with pytest.raises(ZeroDivisionError):
+    with pytest.raises(MemoryError, match="simulated"):
         renderer.render_windows(lazy, poses[0], windows)
     t = lazy.tiles
     assert not t.need.any()
