@@ -456,7 +456,9 @@ class MipTiles:
         # fills them all), so it also counts the filled tiles.
         self._written = np.empty(len(self.filled), np.int64)
         self._n_written = np.zeros(1, np.int64)
-        self._retire_extra = np.zeros(0, np.int64)  # more tiles to zero (old pickles)
+        # More tiles ``retire`` zeroes: logged by a fill that raised before it filled
+        # them (``_after_error``), or listed by an old pickle's fills.
+        self._retire_extra = np.zeros(0, np.int64)
         self._fill_args: tuple | None = None  # ``fill_args``, made on first use
         self._walls_complete = False
         self.retired = False
