@@ -25,7 +25,6 @@ import numpy as np
 from numba import njit
 
 from . import dimensions
-from .geometry import pose_at
 
 if TYPE_CHECKING:
     from .model import Track
@@ -217,26 +216,73 @@ def _chunk_boxes(n_rows: int, n_cols: int, ox: float, oy: float, res: float, x0:
                  y0: np.ndarray, h0: np.ndarray, kappa: np.ndarray, length: np.ndarray,
                  lane_w: float, line_w: float, chunk_m: float) -> np.ndarray:
     """Per chunk of road (segments in order, ``chunk_m`` [m] at most each), the pixel box
-    ``(r_lo, r_hi, c_lo, c_hi)`` that can hold its paint, clipped to the map."""
-    pad = lane_w + 0.5 * line_w + 2.0 * res
+    ``(r_lo, r_hi, c_lo, c_hi)`` that holds every pixel ``_raster_kernel`` may paint for
+    it, clipped to the map: the bounding box of the chunk's footprint (``|d| <= pad``
+    across, ``ua <= u <= ub`` along: a rectangle, or a sector of an annulus on an arc)
+    and a pixel of room for rounding. A box around the centre line padded by ``pad`` on
+    every side held ~4× the rows of a chunk running up the map, each a row of spans for
+    the kernel to find empty."""
+    pad = lane_w + 0.5 * line_w + 2.0 * res  # as ``_raster_kernel``'s
     n = 0
     for j in range(len(length)):
         n += max(1, int(math.ceil(length[j] / chunk_m)))
     boxes = np.empty((n, 4), np.int64)
+    xs = np.empty(8)
+    ys = np.empty(8)
     k = 0
     for j in range(len(length)):
         n_chunks = max(1, int(math.ceil(length[j] / chunk_m)))
+        ch = math.cos(h0[j])
+        sh = math.sin(h0[j])
+        arc = kappa[j] != 0.0
+        sign = radius = cx = cy = phi0 = r_in = r_out = 0.0
+        if arc:  # as ``_raster_kernel``'s
+            inv = 1.0 / kappa[j]
+            sign = 1.0 if kappa[j] > 0.0 else -1.0
+            radius = abs(inv)
+            cx = x0[j] - sh * inv
+            cy = y0[j] + ch * inv
+            phi0 = math.atan2(y0[j] - cy, x0[j] - cx)
+            r_in = max(0.0, radius - pad)
+            r_out = radius + pad
         for c in range(n_chunks):
             ua = length[j] * c / n_chunks
             ub = length[j] * (c + 1) / n_chunks
-            xa, ya, _ = pose_at(x0[j], y0[j], h0[j], kappa[j], ua)
-            xb, yb, _ = pose_at(x0[j], y0[j], h0[j], kappa[j], ub)
-            xm, ym, _ = pose_at(x0[j], y0[j], h0[j], kappa[j], 0.5 * (ua + ub))
-            bow = 0.125 * (ub - ua) ** 2 * abs(kappa[j]) + pad
-            boxes[k, 0] = max(0, int(math.floor((oy - max(ya, yb, ym) - bow) / res)))
-            boxes[k, 1] = min(n_rows - 1, int(math.ceil((oy - min(ya, yb, ym) + bow) / res)))
-            boxes[k, 2] = max(0, int(math.floor((min(xa, xb, xm) - bow - ox) / res)))
-            boxes[k, 3] = min(n_cols - 1, int(math.ceil((max(xa, xb, xm) + bow - ox) / res)))
+            m = 0
+            if not arc:  # the rectangle's corners
+                for u in (ua, ub):
+                    for d in (-pad, pad):
+                        xs[m] = x0[j] + u * ch - d * sh
+                        ys[m] = y0[j] + u * sh + d * ch
+                        m += 1
+            else:  # the sector's corners, and its outer rim where it crosses an axis
+                phi_a = phi0 + sign * ua / radius
+                phi_b = phi0 + sign * ub / radius
+                for phi in (phi_a, phi_b):
+                    for rho in (r_in, r_out):
+                        xs[m] = cx + rho * math.cos(phi)
+                        ys[m] = cy + rho * math.sin(phi)
+                        m += 1
+                lo = min(phi_a, phi_b)
+                hi = max(phi_a, phi_b)
+                quarter = 0.5 * math.pi
+                for q in range(int(math.ceil(lo / quarter)), int(math.floor(hi / quarter)) + 1):
+                    if m == len(xs):  # a sector of a full turn or more: the whole annulus
+                        xs[0], ys[0], xs[1], ys[1] = cx - r_out, cy - r_out, cx + r_out, cy + r_out
+                        m = 2
+                        break
+                    axis = q % 4
+                    xs[m] = cx + (r_out if axis == 0 else -r_out if axis == 2 else 0.0)
+                    ys[m] = cy + (r_out if axis == 1 else -r_out if axis == 3 else 0.0)
+                    m += 1
+            x_lo = xs[:m].min() - res
+            x_hi = xs[:m].max() + res
+            y_lo = ys[:m].min() - res
+            y_hi = ys[:m].max() + res
+            boxes[k, 0] = max(0, int(math.floor((oy - y_hi) / res)))
+            boxes[k, 1] = min(n_rows - 1, int(math.ceil((oy - y_lo) / res)))
+            boxes[k, 2] = max(0, int(math.floor((x_lo - ox) / res)))
+            boxes[k, 3] = min(n_cols - 1, int(math.ceil((x_hi - ox) / res)))
             k += 1
     return boxes
 
@@ -273,8 +319,15 @@ def _raster_kernel(
     tile: int,
     with_labels: bool,
     nonzero_rows: np.ndarray,
+    tr_min: int,
+    tr_max: int,
+    tc_min: int,
+    tc_max: int,
 ) -> None:
-    """Paint the pixels of the tiles marked in ``todo`` (``tile`` × ``tile`` px each);
+    """Paint the pixels of the tiles marked in ``todo`` (``tile`` × ``tile`` px each),
+    which lie in the tile rows ``tr_min … tr_max`` and columns ``tc_min … tc_max`` (the
+    caller knows them from its list: a scan of ``todo`` cost ≈ 1 ns a tile of the map, a
+    few µs a call, for the few tiles a view needs);
     ``labels`` only if ``with_labels`` (else any array: it is not touched). Every row of
     a tile whose intensity it may write gets its bit (``row_bit``) in ``nonzero_rows``
     (per tile of ``todo``, row-major): the rows left without one stay as they were (all
@@ -319,14 +372,8 @@ def _raster_kernel(
     # a row's column spans [lo, hi] (empty: lo > hi): two per line and band on an arc
     spans = np.empty((6 + 2 * len(iv), 2), np.int64)
     gap_ids = np.empty(len(gap_line), np.int64)  # the rule gaps near a chunk
-    # The tiles to paint lie in these tile rows and columns: most chunks are rejected by
-    # four comparisons (a view paints a few tiles of a map's ~10³).
-    tr_min, tr_max, tc_min, tc_max = todo.shape[0], -1, todo.shape[1], -1
-    for tr in range(todo.shape[0]):
-        for tc in range(todo.shape[1]):
-            if todo[tr, tc]:
-                tr_min, tr_max = min(tr_min, tr), tr
-                tc_min, tc_max = min(tc_min, tc), max(tc_max, tc)
+    # Most chunks are rejected by four comparisons with the tiles' rows and columns (a
+    # view paints a few tiles of a map's ~10³).
     k_chunk = 0  # the chunk's row of ``boxes``
     for j in range(len(length)):
         n_chunks = max(1, int(math.ceil(length[j] / chunk_m)))
@@ -560,8 +607,10 @@ def _paint_listed(tiles: np.ndarray, filled: np.ndarray, todo: np.ndarray,
     ``nonzero_rows``), unmarked and set in ``filled``. A tile listed twice is painted and
     recorded once. Returns how many were painted."""
     mask = todo.reshape(-1)
+    n_tile_cols = todo.shape[1]
     start = n_record[0]
     m = start
+    tr_min, tr_max, tc_min, tc_max = todo.shape[0], -1, n_tile_cols, -1
     for k in range(len(tiles)):
         index = tiles[k]
         if 0 <= index < len(filled) and not filled[index] and not mask[index]:
@@ -569,13 +618,16 @@ def _paint_listed(tiles: np.ndarray, filled: np.ndarray, todo: np.ndarray,
             record[m] = index
             nonzero_rows[index] = 0
             m += 1
+            tr, tc = divmod(index, n_tile_cols)
+            tr_min, tr_max = min(tr_min, tr), max(tr_max, tr)
+            tc_min, tc_max = min(tc_min, tc), max(tc_max, tc)
     n_record[0] = m
     if m == start:
         return 0
     _raster_kernel(intensity, labels, ox, oy, res, x0, y0, h0, kappa, length, s0, total,
                    closed, lane_w, line_w, dash, period, gap_line, gap_lo, gap_hi, passes,
                    start_s, start_w, stop_w, chunk_m, boxes, todo, tile, with_labels,
-                   nonzero_rows)
+                   nonzero_rows, tr_min, tr_max, tc_min, tc_max)
     for k in range(start, m):
         mask[record[k]] = 0
         filled[record[k]] = 1

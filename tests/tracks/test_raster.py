@@ -305,6 +305,39 @@ def test_tight_and_wide_arcs_are_painted_whole() -> None:
         assert painted == pytest.approx(solid + dashed, rel=0.02), radius
 
 
+def test_chunk_boxes_hold_every_pixel_a_chunk_paints() -> None:
+    """Each chunk's pixel box (``_chunk_boxes``: the bounding box of its footprint, not a
+    padded box around its centre line) holds every pixel the kernel paints for it: maps
+    painted with those boxes equal maps painted with every box the whole map, labels
+    included, on straights at several headings, arcs tighter than the road's half width,
+    generated tracks with gaps and crossings, and the named ones."""
+    from tests.conftest import generated
+    from tfalda_sim.tracks import Arc
+    from tfalda_sim.tracks.raster import CHUNK_M, TiledMarkingMap
+
+    eight = next(generated(s) for s in range(100) if generated(s).intersections)
+    tracks = [generated(2), generated(9), eight, load_named("thesis"), load_named("oval"),
+              strip(0.37), strip(math.pi / 2), strip(-2.0)]
+    tracks += [Track((Arc(r, 2 * math.pi),), closed=True) for r in (0.3, 0.45, 1.7)]
+    for track in tracks:
+        tight = TiledMarkingMap(track)
+        tight.fill_all()
+        wide = TiledMarkingMap(track)
+        n_chunks = len(tight._boxes)
+        wide._boxes = np.tile(np.array([0, wide.shape[0] - 1, 0, wide.shape[1] - 1],
+                                       np.int64), (n_chunks, 1))
+        wide.fill_all()
+        np.testing.assert_array_equal(tight.intensity, wide.intensity)
+        np.testing.assert_array_equal(tight.labels, wide.labels)
+        assert tight.intensity.any()
+    # A road running up the map: a box is a chunk's length high (and a pixel of room
+    # each side), not the road's width more.
+    up = TiledMarkingMap(strip(math.pi / 2))
+    assert up.paint_args  # makes the boxes
+    rows = up._boxes[:, 1] - up._boxes[:, 0] + 1
+    assert rows.max() <= CHUNK_M / up.resolution_m + 6
+
+
 def test_a_detached_map_paints_fresh_zeros_mapped_when_asked() -> None:
     """``detach`` drops the map's memory (another scene took it) and maps fresh zeros
     only when the intensity is next asked for; the map then paints the same tiles as a
