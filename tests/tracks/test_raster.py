@@ -338,6 +338,51 @@ def test_chunk_boxes_hold_every_pixel_a_chunk_paints() -> None:
     assert rows.max() <= CHUNK_M / up.resolution_m + 6
 
 
+def _with_chunk(track: Track, chunk_m: float):
+    """A whole map of ``track`` painted in chunks of ``chunk_m`` [m]."""
+    from tfalda_sim.tracks.raster import TiledMarkingMap
+
+    tiled = TiledMarkingMap(track)
+    tiled._args = (*tiled._args[:-1], chunk_m)
+    return tiled.fill_all()
+
+
+def test_the_map_does_not_depend_on_the_chunk_length() -> None:
+    """Chunks are only how the kernel walks the road: maps painted in chunks of 0.1 m,
+    0.25 m and the default are equal, labels included (a pixel centre on a junction of
+    segments once fell outside both by a rounding error with some chunk lengths and not
+    others: the thesis track had such a hole in its right line)."""
+    from tests.conftest import generated
+    from tfalda_sim.tracks import Arc
+    from tfalda_sim.tracks.raster import CHUNK_M
+
+    assert CHUNK_M not in (0.1, 0.25)
+    eight = next(generated(s) for s in range(100) if generated(s).intersections)
+    tracks = [load_named("thesis"), load_named("oval"), load_named("left-curve"), eight,
+              generated(2), generated(9), strip(0.37),
+              Track((Arc(0.3, 2 * math.pi),), closed=True)]
+    for track in tracks:
+        default = rasterize(track)
+        for chunk_m in (0.1, 0.25):
+            other = _with_chunk(track, chunk_m)
+            np.testing.assert_array_equal(other.intensity, default.intensity)
+            np.testing.assert_array_equal(other.labels, default.labels)
+
+
+def test_solid_lines_have_no_hole_at_a_junction_of_segments() -> None:
+    """Across every junction of segments of the named tracks without crossings, the
+    side lines' middle is painted in full (the thesis track's grid puts pixel centres
+    exactly on a junction: they belong to both segments' ends)."""
+    for name in ("thesis", "oval", "left-curve", "straight"):
+        track = load_named(name)
+        m = rasterize(track)
+        junctions = track.table.s0[1:] if len(track.table.s0) > 1 else []
+        for s_k in junctions:
+            for lateral in (-track.lane_width_m, track.lane_width_m):
+                for s in s_k + np.linspace(-0.02, 0.02, 41):
+                    assert value_at(m, track, s, lateral)[0] == 255, (name, s_k, lateral, s)
+
+
 def test_a_detached_map_paints_fresh_zeros_mapped_when_asked() -> None:
     """``detach`` drops the map's memory (another scene took it) and maps fresh zeros
     only when the intensity is next asked for; the map then paints the same tiles as a
