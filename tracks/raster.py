@@ -215,6 +215,23 @@ def _near_line(d: float, lane_w: float, reach: float) -> bool:
 
 
 @njit(cache=True)
+def _segment_frame(x0: float, y0: float, h0: float, kappa: float
+                   ) -> tuple[float, float, float, float, float, float, float]:
+    """A segment's constants for painting: the cosine and sine of its start heading and,
+    on an arc (``kappa`` ≠ 0), its turn's sign, radius [m], centre ``(cx, cy)`` [m] and
+    the angle [rad] of its start seen from the centre (zeros on a straight)."""
+    ch = math.cos(h0)
+    sh = math.sin(h0)
+    if kappa == 0.0:
+        return ch, sh, 0.0, 0.0, 0.0, 0.0, 0.0
+    inv = 1.0 / kappa
+    cx = x0 - sh * inv
+    cy = y0 + ch * inv
+    return (ch, sh, 1.0 if kappa > 0.0 else -1.0, abs(inv), cx, cy,
+            math.atan2(y0 - cy, x0 - cx))
+
+
+@njit(cache=True)
 def _chunk_span(length: float, c: int, n_chunks: int) -> tuple[float, float]:
     """Chunk ``c`` of ``n_chunks`` of a segment ``length`` [m] long: its ``(ua, ub)``
     [m] along the segment, the last ending at ``length`` itself (``length · n / n`` may
@@ -245,19 +262,10 @@ def _chunk_boxes(n_rows: int, n_cols: int, ox: float, oy: float, res: float, x0:
     k = 0
     for j in range(len(length)):
         n_chunks = max(1, int(math.ceil(length[j] / chunk_m)))
-        ch = math.cos(h0[j])
-        sh = math.sin(h0[j])
         arc = kappa[j] != 0.0
-        sign = radius = cx = cy = phi0 = r_in = r_out = 0.0
-        if arc:  # as ``_raster_kernel``'s
-            inv = 1.0 / kappa[j]
-            sign = 1.0 if kappa[j] > 0.0 else -1.0
-            radius = abs(inv)
-            cx = x0[j] - sh * inv
-            cy = y0[j] + ch * inv
-            phi0 = math.atan2(y0[j] - cy, x0[j] - cx)
-            r_in = max(0.0, radius - pad)
-            r_out = radius + pad
+        ch, sh, sign, radius, cx, cy, phi0 = _segment_frame(x0[j], y0[j], h0[j], kappa[j])
+        r_in = max(0.0, radius - pad)
+        r_out = radius + pad
         for c in range(n_chunks):
             ua, ub = _chunk_span(length[j], c, n_chunks)
             m = 0
@@ -391,7 +399,7 @@ def _raster_kernel(
         n_chunks = max(1, int(math.ceil(length[j] / chunk_m)))
         arc = kappa[j] != 0.0
         ready = False  # the segment's constants, computed once a chunk of it is painted
-        ch = sh = inv = sign = radius = cx = cy = phi0 = 0.0
+        ch = sh = sign = radius = cx = cy = phi0 = 0.0
         for c in range(n_chunks):
             r_lo = boxes[k_chunk, 0]
             r_hi = boxes[k_chunk, 1]
@@ -404,15 +412,8 @@ def _raster_kernel(
                 continue
             if not ready:
                 ready = True
-                ch = math.cos(h0[j])
-                sh = math.sin(h0[j])
-                if arc:
-                    inv = 1.0 / kappa[j]
-                    sign = 1.0 if kappa[j] > 0.0 else -1.0
-                    radius = abs(inv)
-                    cx = x0[j] - sh * inv
-                    cy = y0[j] + ch * inv
-                    phi0 = math.atan2(y0[j] - cy, x0[j] - cx)
+                ch, sh, sign, radius, cx, cy, phi0 = _segment_frame(x0[j], y0[j], h0[j],
+                                                                    kappa[j])
             ua, ub = _chunk_span(length[j], c, n_chunks)
             last = c == n_chunks - 1
             # A pixel centre on a junction of segments may come out a rounding error
