@@ -39,8 +39,10 @@ DEFAULT_RESOLUTION_M: float = 0.004
 CHUNK_M: float = 0.75
 """Road is painted in chunks of at most this length [m], each in its own pixel box (the
 map does not depend on it: tested). A tile meets fewer chunks of longer ones, each with
-its rows' spans to find; longer ones bulge more on arcs: 0.75 m painted a view's tiles
-≈ 13 % faster than 0.25 m, 0.5 m and 1 m ≈ 3–6 % (twentieth session, BENCHMARKS.md)."""
+its rows' spans to find; longer ones bulge more on arcs and leave the plain path (no
+``_paint_pixel``) over more road near gaps and crossing markings: 0.75 m painted a view's
+tiles 9–15 % faster than 0.25 m in three runs, 0.5 m and 1 m less consistently
+(twentieth session, BENCHMARKS.md)."""
 
 VIRTUAL: int = 0x80
 """Label bit: the marking runs here but is not painted (dash gap or rule gap)."""
@@ -578,9 +580,11 @@ def _raster_kernel(
                                           and sign * (vx * by_ - vy * bx_) > INSIDE_MARGIN * hv):
                                     u = ((sign * (math.atan2(vy, vx) - phi0))
                                          % (2.0 * math.pi)) * radius
-                                    if c == 0 and u > u_max and (
-                                            u >= 2.0 * math.pi * radius - ZERO_MARGIN_M):
-                                        u -= 2.0 * math.pi * radius  # just before the start
+                                    turn = 2.0 * math.pi * radius
+                                    if (c == 0 and u > u_max and u >= turn - ZERO_MARGIN_M
+                                            and length[j] < turn - ZERO_MARGIN_M):
+                                        u -= turn  # just before the start (not a full turn,
+                                        # whose last chunk has the pixel at its end)
                                     if u < u_min or u > u_max or (u == ub and not last):
                                         continue
                                 if side:  # ``_paint_pixel``'s value, its expressions as they are
@@ -593,6 +597,8 @@ def _raster_kernel(
                                 s = s0[j] + u
                                 if closed and s >= total:
                                     s -= total
+                                elif closed and s < 0.0:  # a rounding error before the seam:
+                                    s += total  # the last segment's end, as it paints it
                                 if centre:  # likewise for the centre line's dashes
                                     along = (_dash_integral(s + 0.5 * res, dash, period)
                                              - _dash_integral(s - 0.5 * res, dash, period))
@@ -687,9 +693,12 @@ def _clip_half_plane(lo: float, hi: float, coef: float, rhs: float, cx: float,
 def _linear_span(coef: float, base: float, lo_v: float, hi_v: float, x0: float, ox: float,
                  res: float, q_lo: int, q_hi: int) -> tuple[int, int]:
     """The columns ``q_lo … q_hi`` of a row whose pixel centres ``px`` can have
-    ``coef · (px − x0) + base`` in ``[lo_v, hi_v]`` (half a pixel of rounding room)."""
+    ``coef · (px − x0) + base`` in ``[lo_v, hi_v]`` (half a pixel of rounding room; a
+    ``coef`` of rounding noise, e.g. cos(π/2), moves the value by less than
+    ``ZERO_MARGIN_M`` across a map: a row that far outside is kept, or a pixel row on a
+    chunk boundary of a road running up the map fell in neither chunk's spans)."""
     if abs(coef) < 1e-12:
-        if base < lo_v or base > hi_v:
+        if base < lo_v - ZERO_MARGIN_M or base > hi_v + ZERO_MARGIN_M:
             return 0, -1
         return q_lo, q_hi
     xa = x0 + (lo_v - base) / coef

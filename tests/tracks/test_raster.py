@@ -338,46 +338,68 @@ def test_chunk_boxes_hold_every_pixel_a_chunk_paints() -> None:
     assert rows.max() <= CHUNK_M / up.resolution_m + 6
 
 
-def _with_chunk(track: Track, chunk_m: float):
-    """A whole map of ``track`` painted in chunks of ``chunk_m`` [m]."""
+def _with_chunk(track: Track, chunk_m: float | None, labels: bool = True):
+    """``(intensity, labels)`` of ``track`` painted in chunks of ``chunk_m`` [m] (None: the
+    default): whole with labels, else (as a lazy scene paints) in random batches of tiles."""
     from tfalda_sim.tracks.raster import TiledMarkingMap
 
-    tiled = TiledMarkingMap(track)
-    tiled._args = (*tiled._args[:-1], chunk_m)
-    return tiled.fill_all()
+    tiled = TiledMarkingMap(track, labels=labels)
+    if chunk_m is not None:
+        tiled._args = (*tiled._args[:-1], chunk_m)
+    if labels:
+        full = tiled.fill_all()
+        return full.intensity, full.labels
+    order = np.random.default_rng(0).permutation(tiled.filled.size)
+    for batch in np.array_split(order, 9):
+        tiled.fill_listed(batch)
+    assert tiled.complete
+    return tiled.intensity, None
 
 
-def test_the_map_does_not_depend_on_the_chunk_length() -> None:
+def test_the_map_does_not_depend_on_the_chunk_length(eight: Track) -> None:
     """Chunks are only how the kernel walks the road: maps painted in chunks of 0.1 m,
-    0.25 m and the default are equal, labels included (a pixel centre on a junction of
-    segments once fell outside both by a rounding error with some chunk lengths and not
-    others: the thesis track had such a hole in its right line)."""
+    0.25 m and the default are equal, labels included, and so are maps without labels
+    painted tile batch by tile batch (the plain path a lazy scene takes). A pixel centre on
+    a junction of segments once fell outside both by a rounding error with some chunk
+    lengths and not others (the thesis track had such a hole in its right line); a seam
+    of a closed track and a full turn shorter than a chunk are junctions too."""
     from tests.conftest import generated
     from tfalda_sim.tracks import Arc
     from tfalda_sim.tracks.raster import CHUNK_M
 
     assert CHUNK_M not in (0.1, 0.25)
-    eight = next(generated(s) for s in range(100) if generated(s).intersections)
     tracks = [load_named("thesis"), load_named("oval"), load_named("left-curve"), eight,
               generated(2), generated(9), strip(0.37),
-              Track((Arc(0.3, 2 * math.pi),), closed=True)]
+              Track((Arc(0.3, 2 * math.pi),), closed=True),
+              # a circle shorter than one default chunk, its seam on pixel centres
+              Track((Arc(0.11399999999999991, 2 * math.pi),), closed=True,
+                    start=Pose(0.0, 0.0, math.pi / 2)),
+              # and one inside an open track (no seam: the full turn's end is its start)
+              Track((Straight(0.5), Arc(0.11399999999999991, 2 * math.pi), Straight(0.5)),
+                    closed=False, start=Pose(0.0, 0.0, math.pi / 2))]
     for track in tracks:
-        default = rasterize(track)
-        for chunk_m in (0.1, 0.25):
-            other = _with_chunk(track, chunk_m)
-            np.testing.assert_array_equal(other.intensity, default.intensity)
-            np.testing.assert_array_equal(other.labels, default.labels)
+        for labels in (True, False):
+            intensity, label_map = _with_chunk(track, None, labels)
+            for chunk_m in (0.1, 0.25):
+                other, other_labels = _with_chunk(track, chunk_m, labels)
+                np.testing.assert_array_equal(other, intensity)
+                np.testing.assert_array_equal(other_labels, label_map)
 
 
 def test_solid_lines_have_no_hole_at_a_junction_of_segments() -> None:
     """Across every junction of segments of the named tracks without crossings, the
-    side lines' middle is painted in full (the thesis track's grid puts pixel centres
-    exactly on a junction: they belong to both segments' ends)."""
-    for name in ("thesis", "oval", "left-curve", "straight"):
+    side lines' middle is painted in full. The thesis track's grid puts pixel centres
+    exactly on the junction of its curve and its last straight (checked here: the case
+    this test is for); they belong to both segments' ends."""
+    thesis = load_named("thesis")
+    m = rasterize(thesis)
+    x_junction = float(thesis.table.x0[2])  # where the kernel starts the last straight
+    col = (x_junction - m.origin_m[0]) / m.resolution_m - 0.5
+    assert col == round(col), "the thesis grid no longer meets a junction: pick a track that does"
+    for name in ("thesis", "oval", "left-curve"):
         track = load_named(name)
         m = rasterize(track)
-        junctions = track.table.s0[1:] if len(track.table.s0) > 1 else []
-        for s_k in junctions:
+        for s_k in track.table.s0[1:]:
             for lateral in (-track.lane_width_m, track.lane_width_m):
                 for s in s_k + np.linspace(-0.02, 0.02, 41):
                     assert value_at(m, track, s, lateral)[0] == 255, (name, s_k, lateral, s)
