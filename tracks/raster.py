@@ -401,7 +401,7 @@ def _raster_kernel(
         n_chunks = max(1, int(math.ceil(length[j] / chunk_m)))
         arc = kappa[j] != 0.0
         ready = False  # the segment's constants, computed once a chunk of it is painted
-        ch = sh = sign = radius = cx = cy = phi0 = 0.0
+        ch = sh = sign = radius = cx = cy = phi0 = turn = 0.0
         for c in range(n_chunks):
             r_lo = boxes[k_chunk, 0]
             r_hi = boxes[k_chunk, 1]
@@ -416,6 +416,7 @@ def _raster_kernel(
                 ready = True
                 ch, sh, sign, radius, cx, cy, phi0 = _segment_frame(x0[j], y0[j], h0[j],
                                                                     kappa[j])
+                turn = 2.0 * math.pi * radius  # an arc's length once round [m]
             ua, ub = _chunk_span(length[j], c, n_chunks)
             last = c == n_chunks - 1
             # A pixel centre on a junction of segments may come out a rounding error
@@ -580,7 +581,6 @@ def _raster_kernel(
                                           and sign * (vx * by_ - vy * bx_) > INSIDE_MARGIN * hv):
                                     u = ((sign * (math.atan2(vy, vx) - phi0))
                                          % (2.0 * math.pi)) * radius
-                                    turn = 2.0 * math.pi * radius
                                     if (c == 0 and u > u_max and u >= turn - ZERO_MARGIN_M
                                             and length[j] < turn - ZERO_MARGIN_M):
                                         u -= turn  # just before the start (not a full turn,
