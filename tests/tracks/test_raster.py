@@ -305,7 +305,7 @@ def test_tight_and_wide_arcs_are_painted_whole() -> None:
         assert painted == pytest.approx(solid + dashed, rel=0.02), radius
 
 
-def test_chunk_boxes_hold_every_pixel_a_chunk_paints() -> None:
+def test_chunk_boxes_hold_every_pixel_a_chunk_paints(eight: Track) -> None:
     """Each chunk's pixel box (``_chunk_boxes``: the bounding box of its footprint, not a
     padded box around its centre line) holds every pixel the kernel paints for it: maps
     painted with those boxes equal maps painted with every box the whole map, labels
@@ -315,7 +315,6 @@ def test_chunk_boxes_hold_every_pixel_a_chunk_paints() -> None:
     from tfalda_sim.tracks import Arc
     from tfalda_sim.tracks.raster import CHUNK_M, TiledMarkingMap
 
-    eight = next(generated(s) for s in range(100) if generated(s).intersections)
     tracks = [generated(2), generated(9), eight, load_named("thesis"), load_named("oval"),
               strip(0.37), strip(math.pi / 2), strip(-2.0)]
     tracks += [Track((Arc(r, 2 * math.pi),), closed=True) for r in (0.3, 0.45, 1.7)]
