@@ -387,6 +387,22 @@ def test_the_board_carries_infos_exactly_or_refuses_them() -> None:
     assert _layout({f"k{i}": 1.0 for i in range(BOARD_INFO_SLOTS)}) is not None
 
 
+@pytest.mark.parametrize(("flags", "start", "stop", "want"), [
+    ([0, 0, 0, 0], 0, 2, False),   # nobody resets
+    ([0, 0, 1, 0], 0, 2, True),    # only another lane's env
+    ([1, 0, 1, 0], 0, 2, False),   # this lane resets too: no time to spare
+    ([0, 1, 0, 0], 0, 2, False),   # only this lane
+    ([1, 0, 0, 0], 2, 4, True),    # another lane before this one
+    ([0, 0, 0, 1], 1, 3, True),    # … or after it
+])
+def test_a_lane_prepares_resets_only_while_only_other_lanes_reset(
+        flags: list[int], start: int, stop: int, want: bool) -> None:
+    from tfalda_sim.envs.vector import _others_reset
+
+    for dtype in (np.bool_, np.uint8):  # this process's flags, the board's
+        assert _others_reset(np.array(flags, dtype), start, stop) is want
+
+
 def _abandon_next_wait(monkeypatch: pytest.MonkeyPatch) -> None:
     """The next wait for a worker's posted step raises KeyboardInterrupt (a Ctrl-C)."""
     from tfalda_sim.envs import vector
