@@ -394,6 +394,9 @@ def test_the_board_carries_infos_exactly_or_refuses_them() -> None:
     ([0, 1, 0, 0], 0, 2, False),   # only this lane
     ([1, 0, 0, 0], 2, 4, True),    # another lane before this one
     ([0, 0, 0, 1], 1, 3, True),    # … or after it
+    ([0, 1, 0, 0], 2, 4, True),    # the env just before this lane's first
+    ([0, 1, 1, 0], 0, 2, False),   # this lane's last env resets
+    ([0, 1, 0, 0], 2, 2, True),    # a lane of no envs
 ])
 def test_a_lane_prepares_resets_only_while_only_other_lanes_reset(
         flags: list[int], start: int, stop: int, want: bool) -> None:
