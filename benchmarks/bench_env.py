@@ -13,9 +13,14 @@ road every ≈ 50 steps, so a reset's cost counts):
   re-uses its scene) and with the default, a new generated track every reset;
 - ``gymnasium.make_vec("TfaldaTrack-v0", num_envs=N)`` for N = 1 and 2 (the env's default
   vectorisation mode) and, for comparison, Gymnasium's ``AsyncVectorEnv`` with 2 envs, in
-  "lanes" mode on default generated tracks; steps are env steps (N per vector step);
-- the machine's ceiling for them: one single env alone in a process, then one in each of
-  2 processes at once (pinned one per core, talking to nobody while they step). Two busy
+  "lanes" mode on default generated tracks; steps are env steps (N per vector step).
+  All of them step the same two streams (``STREAMS``: env i reset with seed i, its
+  actions drawn for it before each turn, not timed), "1 env" each stream in a 1-env
+  vector env of its own: the same episodes and tracks, so the ratio of 2 envs to 1 is
+  the scaling alone, not the luck of different seeds;
+- the machine's ceiling for them: the same two streams stepped by single envs in one
+  process alone, then in 2 processes at once (pinned one per core, talking to nobody
+  while they step). Two busy
   processes share caches, memory bandwidth and, on a VM, the host with its other guests.
   Two figures: their turns' wall clock (a turn lasts until the slower of the two is done:
   two envs on different tracks step at different paces over a turn, so this ceiling
@@ -31,8 +36,8 @@ tracks) and the reference run interleaved, in rounds of one turn each (``CHUNK_S
 steps; the reference's ≈ 10× slower steps are fewer per turn, ``REFERENCE_STEPS`` in
 all), so that the host's drift (± 10 % between runs a minute apart here) does not enter
 their ratios; so do the vector envs
-(``make_vec`` with 1 and 2 envs and ``AsyncVectorEnv``), in turns of ≈ ``CHUNK_STEPS`` env
-steps. Needs Box2D for the reference
+(``make_vec`` with 1 and 2 envs, ``AsyncVectorEnv`` and the ceiling), in turns of
+``CHUNK_STEPS`` env steps. Needs Box2D for the reference
 (``pip install "gymnasium[box2d]"``, in the ``dev`` extra).
 """
 
@@ -56,6 +61,8 @@ from _machine import machine
 from tqdm import tqdm
 
 import tfalda_sim  # noqa: F401  (registers TfaldaTrack-v0)
+from tfalda_sim.rendering.scene import _last_marking
+from tfalda_sim.tracks.generator import _generate_cached
 
 REFERENCE = "CarRacing-v3 (reference)"
 MAKE_VEC_1 = "make_vec, 1 env, lanes, generated"
@@ -131,91 +138,150 @@ def interleaved_steps_per_second(makes: dict[str, Callable[[], gym.Env]], steps:
                    "episodes": resets[name] + 1} for name in envs}
 
 
-def vector_steps_per_second(make: Callable[[], gym.vector.VectorEnv], steps: int, desc: str,
-                            quiet: bool) -> dict[str, float]:
-    """Env steps/s of a vector env (autoreset inside) over about ``steps`` env steps."""
-    return interleaved_vector_steps_per_second({desc: make}, steps, quiet)[desc]
+STREAMS = 2
+"""Env streams every vector configuration and the ceiling step: stream i is an env reset
+with seed i (autoreset then draws its tracks) and driven by the actions of
+``stream_actions(i)``. A vector env of 2 envs steps both at once; "1 env" steps each in
+its own 1-env vector env (one process alone: each in turn): the same episodes, the same
+tracks, the same actions, so a ratio compares the same work. (Two different seeds drew 47
+and 57 episodes in 3000 steps here: ±2 % on a ratio from the seeds alone.)"""
 
 
-VECTOR_SEED_STRIDE = 1000
-"""Reset seeds of the vector envs measured together: the k-th starts from ``k ×`` this.
-Envs of one process with the same seed draw the same tracks, and a generated track is one
-object per process (``GENERATE_CACHE_SIZE``): the second env on it would find its marking
-map painted by the first, paint less and read faster than it is."""
+def stream_actions(stream: int, space: gym.spaces.Box, count: int,
+                   rng: np.random.Generator | None = None) -> np.ndarray:
+    """The next ``count`` actions of ``stream`` (``(count, *space.shape)``, uniform in the
+    Box), from its generator ``rng`` (made for the stream if None: the first draws).
+    Drawn before a turn, not timed: Gymnasium's ``Box.sample`` costs 20 µs alone and
+    ≈ 55 µs between env steps here, more than a tenth of a step, and a vector env's one
+    sample for all its envs would count for it less of that than one env's."""
+    if rng is None:
+        rng = stream_rng(stream)
+    return rng.uniform(space.low, space.high, (count, *space.shape)).astype(space.dtype)
+
+
+def stream_rng(stream: int) -> np.random.Generator:
+    """The action generator of ``stream`` (apart from the env's own, seeded with
+    ``stream``)."""
+    return np.random.default_rng([ACTION_SEED, stream])
+
+
+ACTION_SEED = 7
+"""Entropy the streams' action generators add to the stream number."""
+
+
+def forget_shared_tracks() -> None:
+    """Drop what envs of this process share between resets: the generated tracks
+    (``GENERATE_CACHE_SIZE`` of them) and the last scene's painted marking map. The
+    configurations measured together step the same streams, so they draw the same tracks:
+    one that found another's track painted would paint less and read faster than it is.
+    Called before every turn."""
+    _generate_cached.cache_clear()
+    _last_marking.clear()
 
 
 class _VectorTurns:
-    """A vector env stepped in turns (``interleaved_vector_steps_per_second``), reset with
-    ``seed`` (env i: ``seed + i``)."""
+    """Vector envs that together step the ``STREAMS`` streams (env i of the
+    concatenation: stream i), in turns (``interleaved_vector_steps_per_second``)."""
 
-    def __init__(self, venv: gym.vector.VectorEnv, seed: int = 0) -> None:
-        self.venv = venv
-        self.num_envs = venv.num_envs
+    def __init__(self, venvs: list[gym.vector.VectorEnv]) -> None:
+        self.venvs = venvs
         try:
-            venv.action_space.seed(seed)
-            venv.reset(seed=seed)
-            for _ in range(WARMUP_STEPS):
-                venv.step(venv.action_space.sample())
+            first = 0
+            self.streams: list[range] = []
+            for venv in venvs:
+                self.streams.append(range(first, first + venv.num_envs))
+                first += venv.num_envs
+            if first != STREAMS:
+                raise ValueError(f"the vector envs hold {first} envs, not {STREAMS}")
+            self.num_envs = STREAMS
+            self.space = venvs[0].single_action_space
+            self.rngs = [stream_rng(i) for i in range(STREAMS)]
+            forget_shared_tracks()
+            for venv, streams in zip(venvs, self.streams, strict=True):
+                venv.reset(seed=streams.start)
+            self._step(WARMUP_STEPS, timed=False)
         except BaseException:
-            venv.close()
+            self.close()
             raise
 
+    def _step(self, calls: int, timed: bool = True) -> tuple[float, int]:
+        actions = [stream_actions(i, self.space, calls, self.rngs[i]) for i in range(STREAMS)]
+        elapsed, episodes = 0.0, 0
+        for venv, streams in zip(self.venvs, self.streams, strict=True):
+            batch = np.stack([actions[i] for i in streams], axis=1)
+            t0 = time.perf_counter()
+            for k in range(calls):
+                _, _, terminated, truncated, _ = venv.step(batch[k])
+                episodes += int(np.count_nonzero(terminated | truncated))
+            elapsed += time.perf_counter() - t0
+        return (elapsed if timed else 0.0), episodes
+
     def turn(self, calls: int) -> tuple[float, int]:
-        """``calls`` vector steps: their time [s] and the episodes they ended."""
-        venv, episodes = self.venv, 0
-        t0 = time.perf_counter()
-        for _ in range(calls):
-            _, _, terminated, truncated, _ = venv.step(venv.action_space.sample())
-            episodes += int(np.count_nonzero(terminated | truncated))
-        return time.perf_counter() - t0, episodes
+        """``calls`` steps of every stream: their time [s] and the episodes they ended."""
+        forget_shared_tracks()
+        return self._step(calls)
 
     def close(self) -> None:
-        self.venv.close()
+        for venv in self.venvs:
+            venv.close()
 
 
-def _solo_process(conn: Connection, cpu: int | None, seed: int) -> None:
-    """One env stepped alone in its own process, pinned to ``cpu``: ``n`` steps per
-    message ``n`` (0 ends it), answered with (time [s], episodes)."""
+def _solo_process(conn: Connection, cpu: int | None, streams: list[int]) -> None:
+    """Single envs stepping ``streams`` in one process, pinned to ``cpu``, one after
+    another: ``n`` steps of each stream per message ``n`` (0 ends it), answered with
+    (time [s], episodes)."""
     if cpu is not None:
         os.sched_setaffinity(0, {cpu})
     cv2.setNumThreads(1)
-    env = gym.make("TfaldaTrack-v0")
-    env.action_space.seed(seed)
-    env.reset(seed=seed)
-    for _ in range(WARMUP_STEPS):
-        env.step(env.action_space.sample())
+    envs = [gym.make("TfaldaTrack-v0") for _ in streams]
+    rngs = [stream_rng(i) for i in streams]
+
+    def step(n: int) -> tuple[float, int]:
+        elapsed, episodes = 0.0, 0
+        for env, i, rng in zip(envs, streams, rngs, strict=True):
+            actions = stream_actions(i, env.action_space, n, rng)
+            t0 = time.perf_counter()
+            for k in range(n):
+                _, _, terminated, truncated, _ = env.step(actions[k])
+                if terminated or truncated:
+                    env.reset()
+                    episodes += 1
+            elapsed += time.perf_counter() - t0
+        return elapsed, episodes
+
+    for env, i in zip(envs, streams, strict=True):
+        env.reset(seed=i)
+    step(WARMUP_STEPS)
     conn.send(None)
     while n := conn.recv():
-        episodes = 0
-        t0 = time.perf_counter()
-        for _ in range(n):
-            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-            if terminated or truncated:
-                env.reset()
-                episodes += 1
-        conn.send((time.perf_counter() - t0, episodes))
-    env.close()
+        forget_shared_tracks()
+        conn.send(step(n))
+    for env in envs:
+        env.close()
 
 
 class _SoloProcessTurns:
-    """``n`` single envs in as many processes, one per core, stepped at the same time and
-    talking to nobody while they step: what the machine gives ``n`` busy processes of
-    this workload at once (its cache, memory bandwidth, and the host's other guests
-    share), the ceiling of any vector env. A turn lasts until the slower process is
-    done."""
+    """The ``STREAMS`` streams stepped by single envs in ``n`` processes, one per core
+    (stream i in process ``i % n``), at the same time and talking to nobody while they
+    step: with ``n`` = 2, what the machine gives 2 busy processes of this workload at once
+    (its cache, memory bandwidth, and the host's other guests share), the ceiling of any
+    vector env; with 1, the same streams one after another. A turn lasts until the slower
+    process is done."""
 
     def __init__(self, n: int, cpus: list[int] | None) -> None:
         ctx = multiprocessing.get_context("spawn")
-        self.num_envs = n
+        self.num_envs = STREAMS
         self.own_s = [0.0] * n  # each process's own stepping time [s]
-        self.steps_each = 0  # steps each process made (all make the same)
+        self.steps_each = [0] * n  # env steps each process made
+        self.per_process = [list(range(i, STREAMS, n)) for i in range(n)]
         self.conns: list[Connection] = []
         self.procs: list[multiprocessing.process.BaseProcess] = []
         try:
             for i in range(n):
                 parent, child = ctx.Pipe()
                 cpu = cpus[i % len(cpus)] if cpus else None
-                proc = ctx.Process(target=_solo_process, args=(child, cpu, i), daemon=True)
+                proc = ctx.Process(target=_solo_process,
+                                   args=(child, cpu, self.per_process[i]), daemon=True)
                 proc.start()
                 child.close()  # the child's end is the child's: its death reads as EOF here
                 self.conns.append(parent)
@@ -235,19 +301,20 @@ class _SoloProcessTurns:
                                f"{self.procs[w].exitcode})") from None
 
     def turn(self, calls: int) -> tuple[float, int]:
+        """``calls`` steps of every stream: the turn's wall clock [s] and episodes."""
         t0 = time.perf_counter()
         for conn in self.conns:
             conn.send(calls)
         answers = [self._answer(w) for w in range(len(self.conns))]
         for w, (own_s, _) in enumerate(answers):
             self.own_s[w] += own_s
-        self.steps_each += calls
+            self.steps_each[w] += calls * len(self.per_process[w])
         return time.perf_counter() - t0, sum(episodes for _, episodes in answers)
 
     def own_pace_steps_per_s(self) -> float:
         """The sum of each process's steps/s over its own stepping time (not waiting for
         the slower one at the end of a turn, nor for the messages)."""
-        return sum(self.steps_each / s for s in self.own_s if s > 0)
+        return sum(n / s for n, s in zip(self.steps_each, self.own_s, strict=True) if s > 0)
 
     def close(self) -> None:
         for conn in self.conns:
@@ -261,41 +328,41 @@ class _SoloProcessTurns:
 
 def interleaved_vector_steps_per_second(makes: dict[str, Callable[[], Any]], steps: int,
                                         quiet: bool) -> dict[str, dict[str, float]]:
-    """Env steps/s of several vector envs (autoreset inside) at once: each made, reset
-    with its own seeds (``VECTOR_SEED_STRIDE``) and warmed up (``WARMUP_STEPS`` vector
-    steps), then all stepped in turns of about ``CHUNK_STEPS``
-    env steps (``CHUNK_STEPS // num_envs`` vector steps) until each has made about
-    ``steps``; one's time is the sum of its turns. ``makes`` give a vector env, or a
-    ``_SoloProcessTurns``. Idle vector envs' workers sleep on their pipes (waking every
-    ``BOARD_NAP_S``), so a turn has the machine to itself."""
+    """Env steps/s of several configurations that each step the ``STREAMS`` streams
+    (autoreset inside): each made, reset and warmed up (``WARMUP_STEPS`` steps a
+    stream), then all stepped in turns of about ``CHUNK_STEPS`` env steps
+    (``CHUNK_STEPS // STREAMS`` steps a stream) until each has made about ``steps``; one's
+    time is the sum of its turns. ``makes`` give a list of vector envs holding
+    ``STREAMS`` envs together (``_VectorTurns``), or a ``_SoloProcessTurns``. Idle vector
+    envs' workers sleep on their pipes (waking every ``BOARD_NAP_S``), so a turn has the
+    machine to itself."""
     runners: dict[str, Any] = {}
     try:
-        for k, (name, make) in enumerate(makes.items()):
+        for name, make in makes.items():
             made = make()
-            runners[name] = (made if isinstance(made, _SoloProcessTurns)
-                             else _VectorTurns(made, k * VECTOR_SEED_STRIDE))
-        calls = {name: max(1, steps // r.num_envs) for name, r in runners.items()}
+            runners[name] = made if isinstance(made, _SoloProcessTurns) else _VectorTurns(made)
+        calls = max(1, steps // STREAMS)
         done = dict.fromkeys(runners, 0)
         clock = dict.fromkeys(runners, 0.0)
         episodes = dict.fromkeys(runners, 0)
-        with tqdm(total=sum(calls[k] * r.num_envs for k, r in runners.items()),
-                  desc=" + ".join(runners), disable=quiet, file=sys.stderr) as bar:
-            while any(done[k] < calls[k] for k in runners):
+        with tqdm(total=len(runners) * calls * STREAMS, desc=" + ".join(runners),
+                  disable=quiet, file=sys.stderr) as bar:
+            while any(done[k] < calls for k in runners):
                 for name, runner in runners.items():
-                    n = min(max(1, CHUNK_STEPS // runner.num_envs), calls[name] - done[name])
+                    n = min(max(1, CHUNK_STEPS // STREAMS), calls - done[name])
                     if n <= 0:
                         continue
                     elapsed, ended = runner.turn(n)
                     clock[name] += elapsed
                     episodes[name] += ended
                     done[name] += n
-                    bar.update(n * runner.num_envs)
+                    bar.update(n * STREAMS)
     finally:
         for runner in runners.values():
             runner.close()
-    results = {name: {"steps_per_s": calls[name] * r.num_envs / clock[name],
-                      "ms_per_step": 1000 * clock[name] / (calls[name] * r.num_envs),
-                      "episodes": episodes[name]} for name, r in runners.items()}
+    results = {name: {"steps_per_s": calls * STREAMS / clock[name],
+                      "ms_per_step": 1000 * clock[name] / (calls * STREAMS),
+                      "episodes": episodes[name]} for name in runners}
     for name, r in runners.items():
         if isinstance(r, _SoloProcessTurns):
             results[name]["own_pace_steps_per_s"] = r.own_pace_steps_per_s()
@@ -335,10 +402,12 @@ def run(steps: int, quiet: bool) -> dict[str, Any]:
         os.sched_setaffinity(0, all_cpus)
     cpus = sorted(all_cpus) if all_cpus is not None else None
     results.update(interleaved_vector_steps_per_second({
-        MAKE_VEC_1: lambda: gym.make_vec("TfaldaTrack-v0", num_envs=1),
-        MAKE_VEC_2: lambda: gym.make_vec("TfaldaTrack-v0", num_envs=2),
+        MAKE_VEC_1: lambda: [gym.make_vec("TfaldaTrack-v0", num_envs=1)
+                             for _ in range(STREAMS)],
+        MAKE_VEC_2: lambda: [gym.make_vec("TfaldaTrack-v0", num_envs=STREAMS)],
         "AsyncVectorEnv, 2 envs, lanes, generated":
-            lambda: gym.make_vec("TfaldaTrack-v0", num_envs=2, vectorization_mode="async"),
+            lambda: [gym.make_vec("TfaldaTrack-v0", num_envs=STREAMS,
+                                  vectorization_mode="async")],
         CEILING_1: lambda: _SoloProcessTurns(1, cpus),
         CEILING_2: lambda: _SoloProcessTurns(2, cpus),
     }, steps, quiet))

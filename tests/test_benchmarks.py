@@ -153,36 +153,72 @@ def test_bench_ab_refuses_a_missing_interpreter() -> None:
     assert "Traceback" not in done.stderr
 
 
-def test_vector_envs_measured_together_draw_different_tracks(monkeypatch) -> None:
-    """The vector envs of ``bench_env`` share a process (and its generated tracks, with
-    their painted marking maps): each is reset with its own seeds, so none steps on
-    tracks another has painted for it."""
+def test_vector_configurations_step_the_same_streams(monkeypatch) -> None:
+    """Every vector configuration of ``bench_env`` steps the same streams: env i of it
+    (across its vector envs) is reset with seed i and gets stream i's actions, whether
+    one vector env holds both streams or two 1-env ones hold one each, so their ratio
+    compares the same work; what envs of one process share between resets (the
+    generated tracks, the last painted marking map) is dropped before every turn."""
     import gymnasium as gym
     import numpy as np
 
     monkeypatch.syspath_prepend(str(BENCHMARKS))
     import bench_env
 
-    seeds: list[int] = []
+    log: dict[str, dict[int, list]] = {}
+    forgotten: list[int] = []
 
-    class Recorder:
-        num_envs = 2
-        action_space = gym.spaces.Box(-1.0, 1.0, (2, 1), np.float32)
+    def recorder(name: str, first: int, n: int) -> gym.vector.VectorEnv:
+        class Recorder:
+            num_envs = n
+            single_action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
 
-        def reset(self, *, seed: int) -> None:
-            seeds.append(seed)
+            def reset(self, *, seed: int) -> None:
+                for i in range(n):
+                    log.setdefault(name, {}).setdefault(first + i, []).append(("seed",
+                                                                              seed + i))
 
-        def step(self, actions: np.ndarray) -> tuple:
-            done = np.zeros(self.num_envs, bool)
-            return None, np.zeros(self.num_envs), done, done, {}
+            def step(self, actions: np.ndarray) -> tuple:
+                assert actions.shape == (n, 1) and actions.dtype == np.float32
+                for i in range(n):
+                    log[name][first + i].append(float(actions[i, 0]))
+                done = np.zeros(n, bool)
+                return None, np.zeros(n), done, done, {}
 
-        def close(self) -> None:
-            pass
+            def close(self) -> None:
+                pass
 
+        return Recorder()  # type: ignore[return-value]
+
+    real_forget = bench_env.forget_shared_tracks
+    monkeypatch.setattr(bench_env, "forget_shared_tracks",
+                        lambda: (forgotten.append(1), real_forget()))
     result = bench_env.interleaved_vector_steps_per_second(
-        {"a": Recorder, "b": Recorder, "c": Recorder}, steps=8, quiet=True)
-    assert set(result) == {"a", "b", "c"}
-    assert seeds == [0, bench_env.VECTOR_SEED_STRIDE, 2 * bench_env.VECTOR_SEED_STRIDE]
+        {"two": lambda: [recorder("two", 0, 2)],
+         "ones": lambda: [recorder("ones", 0, 1), recorder("ones", 1, 1)]},
+        steps=2 * bench_env.CHUNK_STEPS + 10, quiet=True)
+    assert set(result) == {"two", "ones"}
+    assert log["two"] == log["ones"]  # per stream: the same seed, the same actions
+    for i in range(bench_env.STREAMS):
+        stream = log["two"][i]
+        assert stream[0] == ("seed", i)
+        actions = np.array(stream[1:])
+        assert len(actions) == bench_env.WARMUP_STEPS + (2 * bench_env.CHUNK_STEPS + 10) // 2
+        assert np.all(np.abs(actions) <= 1.0) and np.std(actions) > 0.3  # uniform on [-1, 1]
+    assert not np.array_equal(log["two"][0][1:], log["two"][1][1:])  # two streams
+    turns = 3  # a turn of CHUNK_STEPS env steps, another, then the last 10
+    assert len(forgotten) == 2 * (1 + turns)  # at each set-up and before each turn
+
+    # What is forgotten: a generated track and the last scene's marking map.
+    from tfalda_sim.rendering import build_scene
+    from tfalda_sim.rendering.scene import _last_marking
+    from tfalda_sim.tracks import generate
+    from tfalda_sim.tracks.generator import _generate_cached
+
+    build_scene(generate(3))
+    assert _generate_cached.cache_info().currsize > 0 and _last_marking
+    real_forget()
+    assert _generate_cached.cache_info().currsize == 0 and not _last_marking
 
 
 def test_single_envs_and_the_reference_step_in_the_same_rounds(monkeypatch) -> None:
