@@ -61,8 +61,8 @@ from _machine import machine
 from tqdm import tqdm
 
 import tfalda_sim  # noqa: F401  (registers TfaldaTrack-v0)
-from tfalda_sim.rendering.scene import _last_marking
-from tfalda_sim.tracks.generator import _generate_cached
+from tfalda_sim.rendering import scene as scene_module
+from tfalda_sim.tracks import generator as generator_module
 
 REFERENCE = "CarRacing-v3 (reference)"
 MAKE_VEC_1 = "make_vec, 1 env, lanes, generated"
@@ -140,23 +140,17 @@ def interleaved_steps_per_second(makes: dict[str, Callable[[], gym.Env]], steps:
 
 STREAMS = 2
 """Env streams every vector configuration and the ceiling step: stream i is an env reset
-with seed i (autoreset then draws its tracks) and driven by the actions of
-``stream_actions(i)``. A vector env of 2 envs steps both at once; "1 env" steps each in
-its own 1-env vector env (one process alone: each in turn): the same episodes, the same
-tracks, the same actions, so a ratio compares the same work. (Two different seeds drew 47
-and 57 episodes in 3000 steps here: ±2 % on a ratio from the seeds alone.)"""
+with seed i (autoreset then draws its tracks) and driven by the actions of its own
+generator (``stream_rng(i)``, ``stream_actions``); the ceiling's single envs reset the
+step after an episode's end, spending its action, as a vector env's autoreset does. A
+vector env of 2 envs steps both at once; "1 env" steps each in its own 1-env vector env
+(one process alone: each in turn): the same episodes, the same tracks, the same
+actions, so a ratio compares the same work. (Two different seeds drew 47 and 57 episodes
+in 3000 steps here: ±2 % on a ratio from the seeds alone.)"""
 
 
-def stream_actions(stream: int, space: gym.spaces.Box, count: int,
-                   rng: np.random.Generator | None = None) -> np.ndarray:
-    """The next ``count`` actions of ``stream`` (``(count, *space.shape)``, uniform in the
-    Box), from its generator ``rng`` (made for the stream if None: the first draws).
-    Drawn before a turn, not timed: Gymnasium's ``Box.sample`` costs 20 µs alone and
-    ≈ 55 µs between env steps here, more than a tenth of a step, and a vector env's one
-    sample for all its envs would count for it less of that than one env's."""
-    if rng is None:
-        rng = stream_rng(stream)
-    return rng.uniform(space.low, space.high, (count, *space.shape)).astype(space.dtype)
+ACTION_SEED = 7
+"""Entropy the streams' action generators add to the stream number."""
 
 
 def stream_rng(stream: int) -> np.random.Generator:
@@ -165,8 +159,14 @@ def stream_rng(stream: int) -> np.random.Generator:
     return np.random.default_rng([ACTION_SEED, stream])
 
 
-ACTION_SEED = 7
-"""Entropy the streams' action generators add to the stream number."""
+def stream_actions(rng: np.random.Generator, space: gym.spaces.Box, count: int
+                   ) -> np.ndarray:
+    """A stream's next ``count`` actions from its generator ``rng`` (``stream_rng``):
+    ``(count, *space.shape)``, uniform in the Box. Drawn before a turn, not timed:
+    Gymnasium's ``Box.sample`` costs 20 µs alone and ≈ 55 µs between env steps here, more
+    than a tenth of a step, and a vector env's one sample for all its envs would count
+    for it less of that than one env's."""
+    return rng.uniform(space.low, space.high, (count, *space.shape)).astype(space.dtype)
 
 
 def forget_shared_tracks() -> None:
@@ -175,8 +175,22 @@ def forget_shared_tracks() -> None:
     configurations measured together step the same streams, so they draw the same tracks:
     one that found another's track painted would paint less and read faster than it is.
     Called before every turn."""
-    _generate_cached.cache_clear()
-    _last_marking.clear()
+    generator_module._generate_cached.cache_clear()  # looked up now: never a stale binding
+    scene_module._last_marking.clear()
+
+
+def _make_all(makes: list[Callable[[], gym.vector.VectorEnv]]) -> list[gym.vector.VectorEnv]:
+    """The vector envs ``makes`` give, or none: those made are closed if one fails."""
+    made: list[gym.vector.VectorEnv] = []
+    try:
+        for make in makes:
+            made.append(make())
+    except BaseException:
+        for venv in made:
+            with contextlib.suppress(Exception):
+                venv.close()
+        raise
+    return made
 
 
 class _VectorTurns:
@@ -205,7 +219,7 @@ class _VectorTurns:
             raise
 
     def _step(self, calls: int, timed: bool = True) -> tuple[float, int]:
-        actions = [stream_actions(i, self.space, calls, self.rngs[i]) for i in range(STREAMS)]
+        actions = [stream_actions(rng, self.space, calls) for rng in self.rngs]
         elapsed, episodes = 0.0, 0
         for venv, streams in zip(self.venvs, self.streams, strict=True):
             batch = np.stack([actions[i] for i in streams], axis=1)
@@ -222,8 +236,9 @@ class _VectorTurns:
         return self._step(calls)
 
     def close(self) -> None:
-        for venv in self.venvs:
-            venv.close()
+        for venv in self.venvs:  # every one, whatever one of them raises
+            with contextlib.suppress(Exception):
+                venv.close()
 
 
 def _solo_process(conn: Connection, cpu: int | None, streams: list[int]) -> None:
@@ -236,15 +251,23 @@ def _solo_process(conn: Connection, cpu: int | None, streams: list[int]) -> None
     envs = [gym.make("TfaldaTrack-v0") for _ in streams]
     rngs = [stream_rng(i) for i in streams]
 
+    # Gymnasium's NEXT_STEP autoreset, as the vector envs do it: the step after an
+    # episode's last resets instead, spending its action (the same episodes as theirs).
+    ended = [False] * len(envs)
+
     def step(n: int) -> tuple[float, int]:
         elapsed, episodes = 0.0, 0
-        for env, i, rng in zip(envs, streams, rngs, strict=True):
-            actions = stream_actions(i, env.action_space, n, rng)
+        for e, (env, rng) in enumerate(zip(envs, rngs, strict=True)):
+            actions = stream_actions(rng, env.action_space, n)
             t0 = time.perf_counter()
             for k in range(n):
+                if ended[e]:
+                    env.reset()
+                    ended[e] = False
+                    continue
                 _, _, terminated, truncated, _ = env.step(actions[k])
                 if terminated or truncated:
-                    env.reset()
+                    ended[e] = True
                     episodes += 1
             elapsed += time.perf_counter() - t0
         return elapsed, episodes
@@ -402,8 +425,8 @@ def run(steps: int, quiet: bool) -> dict[str, Any]:
         os.sched_setaffinity(0, all_cpus)
     cpus = sorted(all_cpus) if all_cpus is not None else None
     results.update(interleaved_vector_steps_per_second({
-        MAKE_VEC_1: lambda: [gym.make_vec("TfaldaTrack-v0", num_envs=1)
-                             for _ in range(STREAMS)],
+        MAKE_VEC_1: lambda: _make_all(
+            [lambda: gym.make_vec("TfaldaTrack-v0", num_envs=1)] * STREAMS),
         MAKE_VEC_2: lambda: [gym.make_vec("TfaldaTrack-v0", num_envs=STREAMS)],
         "AsyncVectorEnv, 2 envs, lanes, generated":
             lambda: [gym.make_vec("TfaldaTrack-v0", num_envs=STREAMS,

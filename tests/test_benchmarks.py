@@ -153,61 +153,131 @@ def test_bench_ab_refuses_a_missing_interpreter() -> None:
     assert "Traceback" not in done.stderr
 
 
-def test_vector_configurations_step_the_same_streams(monkeypatch) -> None:
-    """Every vector configuration of ``bench_env`` steps the same streams: env i of it
-    (across its vector envs) is reset with seed i and gets stream i's actions, whether
-    one vector env holds both streams or two 1-env ones hold one each, so their ratio
-    compares the same work; what envs of one process share between resets (the
-    generated tracks, the last painted marking map) is dropped before every turn."""
+EPISODE_STEPS = 7
+"""Steps of an episode of the benchmark tests' stand-in envs."""
+
+
+def test_vector_configurations_and_the_ceiling_step_the_same_streams(monkeypatch) -> None:
+    """Every vector configuration of ``bench_env`` and its ceiling step the same streams:
+    env i is reset with seed i and gets stream i's actions, whether one vector env holds
+    both streams, two 1-env ones hold one each, or the ceiling's single envs step them
+    (resetting the step after an episode's end, spending its action, as a vector env's
+    autoreset does), so their ratios compare the same work; what envs of one process
+    share between resets (the generated tracks, the last painted marking map) is dropped
+    before every turn's steps."""
+    import threading
+    from multiprocessing import Pipe
+
     import gymnasium as gym
     import numpy as np
 
     monkeypatch.syspath_prepend(str(BENCHMARKS))
     import bench_env
 
-    log: dict[str, dict[int, list]] = {}
-    forgotten: list[int] = []
+    space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+    events: list[str] = []  # "forget" or "step", in order
 
-    def recorder(name: str, first: int, n: int) -> gym.vector.VectorEnv:
-        class Recorder:
+    class StandIn:
+        """An env of ``EPISODE_STEPS``-step episodes that logs its seeds and actions."""
+
+        action_space = space
+
+        def __init__(self, log: list) -> None:
+            self.log, self.t = log, 0
+
+        def reset(self, *, seed: int | None = None) -> None:
+            self.log.append(("reset", seed))
+            self.t = 0
+
+        def step(self, action: np.ndarray) -> tuple:
+            assert action.shape == (1,) and action.dtype == np.float32
+            events.append("step")
+            self.log.append(float(action[0]))
+            self.t += 1
+            return None, 0.0, self.t == EPISODE_STEPS, False, {}
+
+        def close(self) -> None:
+            pass
+
+    logs: dict[str, dict[int, list]] = {}
+
+    def vector(name: str, first: int, n: int) -> gym.vector.VectorEnv:
+        envs = [StandIn(logs.setdefault(name, {}).setdefault(first + i, []))
+                for i in range(n)]
+
+        class Vector:  # NEXT_STEP autoreset over stand-ins
             num_envs = n
-            single_action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+            single_action_space = space
+
+            def __init__(self) -> None:
+                self.ended = [False] * n
 
             def reset(self, *, seed: int) -> None:
-                for i in range(n):
-                    log.setdefault(name, {}).setdefault(first + i, []).append(("seed",
-                                                                              seed + i))
+                for i, env in enumerate(envs):
+                    env.reset(seed=seed + i)
 
             def step(self, actions: np.ndarray) -> tuple:
-                assert actions.shape == (n, 1) and actions.dtype == np.float32
-                for i in range(n):
-                    log[name][first + i].append(float(actions[i, 0]))
+                assert actions.shape == (n, 1)
                 done = np.zeros(n, bool)
-                return None, np.zeros(n), done, done, {}
+                for i, env in enumerate(envs):
+                    if self.ended[i]:
+                        env.reset()
+                        self.ended[i] = False
+                    else:
+                        done[i] = self.ended[i] = env.step(actions[i])[2]
+                return None, np.zeros(n), done, np.zeros(n, bool), {}
 
             def close(self) -> None:
                 pass
 
-        return Recorder()  # type: ignore[return-value]
+        return Vector()  # type: ignore[return-value]
 
     real_forget = bench_env.forget_shared_tracks
     monkeypatch.setattr(bench_env, "forget_shared_tracks",
-                        lambda: (forgotten.append(1), real_forget()))
+                        lambda: (events.append("forget"), real_forget()))
+    steps = 2 * bench_env.CHUNK_STEPS + 10
     result = bench_env.interleaved_vector_steps_per_second(
-        {"two": lambda: [recorder("two", 0, 2)],
-         "ones": lambda: [recorder("ones", 0, 1), recorder("ones", 1, 1)]},
-        steps=2 * bench_env.CHUNK_STEPS + 10, quiet=True)
+        {"two": lambda: [vector("two", 0, 2)],
+         "ones": lambda: [vector("ones", 0, 1), vector("ones", 1, 1)]},
+        steps=steps, quiet=True)
     assert set(result) == {"two", "ones"}
-    assert log["two"] == log["ones"]  # per stream: the same seed, the same actions
+    # Each set-up and each turn (a turn of CHUNK_STEPS env steps, another, the last 10)
+    # drops the caches before its steps, and only then.
+    turns = 3
+    blocks = " ".join(events).split("forget")
+    assert blocks[0] == "" and len(blocks) == 1 + 2 * (1 + turns)
+    assert all(block.split() and set(block.split()) == {"step"} for block in blocks[1:])
+
+    # The ceiling's process loop, in this process over a pipe: the same streams.
+    made: list[StandIn] = []
+    monkeypatch.setattr(bench_env.gym, "make", lambda env_id: made.append(
+        StandIn(logs.setdefault("solo", {}).setdefault(len(made), []))) or made[-1])
+    monkeypatch.setattr(bench_env.cv2, "setNumThreads", lambda n: None)
+    here, there = Pipe()
+    loop = threading.Thread(target=bench_env._solo_process, args=(there, None, [0, 1]))
+    loop.start()
+    assert here.recv() is None  # warmed up
+    episodes = 0
+    for n in (bench_env.CHUNK_STEPS // 2, bench_env.CHUNK_STEPS // 2, 5):
+        start = len(events)
+        here.send(n)
+        elapsed, ended = here.recv()
+        episodes += ended
+        assert elapsed >= 0 and events[start] == "forget" and "forget" not in events[start + 1:]
+    here.send(0)
+    loop.join(timeout=10)
+    assert not loop.is_alive()
+
+    assert logs["two"] == logs["ones"] == logs["solo"]  # per stream: seed, actions, resets
     for i in range(bench_env.STREAMS):
-        stream = log["two"][i]
-        assert stream[0] == ("seed", i)
-        actions = np.array(stream[1:])
-        assert len(actions) == bench_env.WARMUP_STEPS + (2 * bench_env.CHUNK_STEPS + 10) // 2
+        stream = logs["two"][i]
+        assert stream[0] == ("reset", i)
+        assert len(stream) == 1 + bench_env.WARMUP_STEPS + steps // 2
+        actions = np.array([v for v in stream if isinstance(v, float)])
         assert np.all(np.abs(actions) <= 1.0) and np.std(actions) > 0.3  # uniform on [-1, 1]
-    assert not np.array_equal(log["two"][0][1:], log["two"][1][1:])  # two streams
-    turns = 3  # a turn of CHUNK_STEPS env steps, another, then the last 10
-    assert len(forgotten) == 2 * (1 + turns)  # at each set-up and before each turn
+        assert stream.count(("reset", None)) >= steps // 2 // (EPISODE_STEPS + 1) - 1
+    assert logs["two"][0] != logs["two"][1]  # two streams
+    assert episodes == result["two"]["episodes"] > 0  # the same episodes ended in turns
 
     # What is forgotten: a generated track and the last scene's marking map.
     from tfalda_sim.rendering import build_scene
