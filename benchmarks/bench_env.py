@@ -213,12 +213,13 @@ class _VectorTurns:
             forget_shared_tracks()
             for venv, streams in zip(venvs, self.streams, strict=True):
                 venv.reset(seed=streams.start)
-            self._step(WARMUP_STEPS, timed=False)
+            self._step(WARMUP_STEPS)
         except BaseException:
             self.close()
             raise
 
-    def _step(self, calls: int, timed: bool = True) -> tuple[float, int]:
+    def _step(self, calls: int) -> tuple[float, int]:
+        """``calls`` steps of every stream, untimed turn set-up aside: time [s], episodes."""
         actions = [stream_actions(rng, self.space, calls) for rng in self.rngs]
         elapsed, episodes = 0.0, 0
         for venv, streams in zip(self.venvs, self.streams, strict=True):
@@ -228,7 +229,7 @@ class _VectorTurns:
                 _, _, terminated, truncated, _ = venv.step(batch[k])
                 episodes += int(np.count_nonzero(terminated | truncated))
             elapsed += time.perf_counter() - t0
-        return (elapsed if timed else 0.0), episodes
+        return elapsed, episodes
 
     def turn(self, calls: int) -> tuple[float, int]:
         """``calls`` steps of every stream: their time [s] and the episodes they ended."""
@@ -248,27 +249,19 @@ def _solo_process(conn: Connection, cpu: int | None, streams: list[int]) -> None
     if cpu is not None:
         os.sched_setaffinity(0, {cpu})
     cv2.setNumThreads(1)
-    envs = [gym.make("TfaldaTrack-v0") for _ in streams]
-    rngs = [stream_rng(i) for i in streams]
-
-    # Gymnasium's NEXT_STEP autoreset, as the vector envs do it: the step after an
+    # Gymnasium's NEXT_STEP autoreset, as the vector envs have it: the step after an
     # episode's last resets instead, spending its action (the same episodes as theirs).
-    ended = [False] * len(envs)
+    envs = [gym.wrappers.Autoreset(gym.make("TfaldaTrack-v0")) for _ in streams]
+    rngs = [stream_rng(i) for i in streams]
 
     def step(n: int) -> tuple[float, int]:
         elapsed, episodes = 0.0, 0
-        for e, (env, rng) in enumerate(zip(envs, rngs, strict=True)):
+        for env, rng in zip(envs, rngs, strict=True):
             actions = stream_actions(rng, env.action_space, n)
             t0 = time.perf_counter()
             for k in range(n):
-                if ended[e]:
-                    env.reset()
-                    ended[e] = False
-                    continue
                 _, _, terminated, truncated, _ = env.step(actions[k])
-                if terminated or truncated:
-                    ended[e] = True
-                    episodes += 1
+                episodes += int(terminated or truncated)
             elapsed += time.perf_counter() - t0
         return elapsed, episodes
 

@@ -177,17 +177,19 @@ def test_vector_configurations_and_the_ceiling_step_the_same_streams(monkeypatch
     space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
     events: list[str] = []  # "forget" or "step", in order
 
-    class StandIn:
+    class StandIn(gym.Env):
         """An env of ``EPISODE_STEPS``-step episodes that logs its seeds and actions."""
 
         action_space = space
+        observation_space = space
 
         def __init__(self, log: list) -> None:
             self.log, self.t = log, 0
 
-        def reset(self, *, seed: int | None = None) -> None:
+        def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple:
             self.log.append(("reset", seed))
             self.t = 0
+            return None, {}
 
         def step(self, action: np.ndarray) -> tuple:
             assert action.shape == (1,) and action.dtype == np.float32
