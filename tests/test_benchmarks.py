@@ -189,14 +189,14 @@ def test_vector_configurations_and_the_ceiling_step_the_same_streams(monkeypatch
         def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple:
             self.log.append(("reset", seed))
             self.t = 0
-            return None, {}
+            return np.zeros(1, np.float32), {}
 
         def step(self, action: np.ndarray) -> tuple:
             assert action.shape == (1,) and action.dtype == np.float32
             events.append("step")
             self.log.append(float(action[0]))
             self.t += 1
-            return None, 0.0, self.t == EPISODE_STEPS, False, {}
+            return np.zeros(1, np.float32), 0.0, self.t == EPISODE_STEPS, False, {}
 
         def close(self) -> None:
             pass
@@ -204,35 +204,10 @@ def test_vector_configurations_and_the_ceiling_step_the_same_streams(monkeypatch
     logs: dict[str, dict[int, list]] = {}
 
     def vector(name: str, first: int, n: int) -> gym.vector.VectorEnv:
-        envs = [StandIn(logs.setdefault(name, {}).setdefault(first + i, []))
-                for i in range(n)]
-
-        class Vector:  # NEXT_STEP autoreset over stand-ins
-            num_envs = n
-            single_action_space = space
-
-            def __init__(self) -> None:
-                self.ended = [False] * n
-
-            def reset(self, *, seed: int) -> None:
-                for i, env in enumerate(envs):
-                    env.reset(seed=seed + i)
-
-            def step(self, actions: np.ndarray) -> tuple:
-                assert actions.shape == (n, 1)
-                done = np.zeros(n, bool)
-                for i, env in enumerate(envs):
-                    if self.ended[i]:
-                        env.reset()
-                        self.ended[i] = False
-                    else:
-                        done[i] = self.ended[i] = env.step(actions[i])[2]
-                return None, np.zeros(n), done, np.zeros(n, bool), {}
-
-            def close(self) -> None:
-                pass
-
-        return Vector()  # type: ignore[return-value]
+        """Gymnasium's own NEXT_STEP autoreset and ``seed + i`` over stand-ins."""
+        return gym.vector.SyncVectorEnv(
+            [lambda i=i: StandIn(logs.setdefault(name, {}).setdefault(first + i, []))
+             for i in range(n)])
 
     real_forget = bench_env.forget_shared_tracks
     monkeypatch.setattr(bench_env, "forget_shared_tracks",
