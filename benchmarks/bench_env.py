@@ -10,7 +10,9 @@ road every ≈ 50 steps, so a reset's cost counts):
   envs (below), so that their ratios to it hold no drift between measurements either;
 - ``gymnasium.make("TfaldaTrack-v0")`` in "lanes" mode (ROIs rendered on demand + TFALDA +
   LIS) and "image" mode (full frame + TFALDA + LIS), on one fixed track (the oval: a reset
-  re-uses its scene) and with the default, a new generated track every reset;
+  re-uses its scene) and with the default, a new generated track every reset; their
+  resets are clocked apart too (mean ms per reset, and generated / fixed with the resets
+  off the clock: how much of the gap free resets would close);
 - ``gymnasium.make_vec("TfaldaTrack-v0", num_envs=N)`` for N = 1 and 2 (the env's default
   vectorisation mode) and, for comparison, Gymnasium's ``AsyncVectorEnv`` with 2 envs, in
   "lanes" mode on default generated tracks; steps are env steps (N per vector step).
@@ -72,6 +74,8 @@ CEILING_2 = "2 processes at once, lanes, generated"
 CEILING_2_OWN_PACE = "2 processes at once, each at its own pace"
 SCALING_CEILING = "2 processes at once / 1 (the machine's ceiling)"
 OWN_PACE_CEILING = "2 processes, each at its own pace / 1"
+GENERATED_FIXED = "generated / fixed track (lanes)"
+GENERATED_FIXED_NO_RESETS = "generated / fixed track (lanes), resets off the clock"
 WARMUP_STEPS = 20  # JIT compilation, caches
 
 
@@ -91,14 +95,16 @@ single envs' turns."""
 
 def interleaved_steps_per_second(makes: dict[str, Callable[[], gym.Env]], steps: int,
                                  quiet: bool, totals: dict[str, int] | None = None
-                                 ) -> dict[str, dict[str, float]]:
+                                 ) -> dict[str, dict[str, float | None]]:
     """Random-policy steps/s of several envs at once (resets included): each warmed up by
     ``WARMUP_STEPS`` steps, reset with seed 1, then all stepped in rounds, one turn each,
     until each has made its steps (``steps``, or ``totals[name]``); an env's time is the
-    sum of its turns. There are as many rounds as ``steps`` has turns of ``CHUNK_STEPS``,
-    and an env with other ``totals`` spreads its steps over the same rounds (a slower
-    reference makes fewer steps, in the same minutes as the others: the host's drift
-    stays out of their ratios)."""
+    sum of its turns, of which its resets' share is clocked too (``ms_per_reset``, a
+    reset's mean, None without one; ``steps_per_s_without_resets``, the rate of its steps
+    alone: what free resets would give). There are as many rounds as ``steps`` has turns
+    of ``CHUNK_STEPS``, and an env with other ``totals`` spreads its steps over the same
+    rounds (a slower reference makes fewer steps, in the same minutes as the others: the
+    host's drift stays out of their ratios)."""
     totals = {name: (totals or {}).get(name, steps) for name in makes}
     if any(n < 1 for n in totals.values()):
         raise ValueError(f"every env needs at least one step, got {totals}")
@@ -106,6 +112,7 @@ def interleaved_steps_per_second(makes: dict[str, Callable[[], gym.Env]], steps:
     turn = {name: -(-n // rounds) for name, n in totals.items()}
     envs: dict[str, gym.Env] = {}
     clock = dict.fromkeys(makes, 0.0)
+    reset_clock = dict.fromkeys(makes, 0.0)  # the part of ``clock`` spent in resets
     resets = dict.fromkeys(makes, 0)
     done = dict.fromkeys(makes, 0)
     try:
@@ -125,7 +132,9 @@ def interleaved_steps_per_second(makes: dict[str, Callable[[], gym.Env]], steps:
                     for _ in range(n):
                         _, _, terminated, truncated, _ = env.step(env.action_space.sample())
                         if terminated or truncated:
+                            r0 = time.perf_counter()
                             env.reset()
+                            reset_clock[name] += time.perf_counter() - r0
                             resets[name] += 1
                     clock[name] += time.perf_counter() - t0
                     done[name] += n
@@ -135,7 +144,12 @@ def interleaved_steps_per_second(makes: dict[str, Callable[[], gym.Env]], steps:
             env.close()
     return {name: {"steps_per_s": totals[name] / clock[name],
                    "ms_per_step": 1000 * clock[name] / totals[name],
-                   "episodes": resets[name] + 1} for name in envs}
+                   "episodes": resets[name] + 1,
+                   "ms_per_reset": (1000 * reset_clock[name] / resets[name] if resets[name]
+                                    else None),
+                   "steps_per_s_without_resets": totals[name] / (clock[name]
+                                                                 - reset_clock[name])}
+            for name in envs}
 
 
 STREAMS = 2
@@ -450,8 +464,11 @@ def run(steps: int, quiet: bool) -> dict[str, Any]:
     fixed = results.get("lanes, fixed track (oval)")
     generated = results.get("lanes, new generated track per reset")
     if isinstance(fixed, dict) and isinstance(generated, dict):
-        scaling["generated / fixed track (lanes)"] = (generated["steps_per_s"]
-                                                      / fixed["steps_per_s"])
+        scaling[GENERATED_FIXED] = generated["steps_per_s"] / fixed["steps_per_s"]
+        # What free resets would leave of the gap: the rest is the new ground a new
+        # track's episode paints as it comes into view, and the tracks' own content.
+        scaling[GENERATED_FIXED_NO_RESETS] = (generated["steps_per_s_without_resets"]
+                                              / fixed["steps_per_s_without_resets"])
     m = machine()
     m["pinned_to_one_core"] = "single envs only"
     return {"machine": m, "steps": steps, "envs": results, "ratios": scaling}
@@ -459,20 +476,23 @@ def run(steps: int, quiet: bool) -> dict[str, Any]:
 
 def table(result: dict[str, Any]) -> str:
     """``run``'s result as the printed table: the machine, then per configuration its
-    steps/s, ms/step, episodes and ratio to CarRacing-v3, then the ratios."""
+    steps/s, ms/step, episodes, ratio to CarRacing-v3 and mean reset [ms] (single envs:
+    a vector env's resets are inside its steps), then the ratios."""
     m = result["machine"]
     lines = [f"machine: {m['cores']} cores of {m['cpu']} ({m['simd']}; single envs pinned "
              f"to one, OpenCV threads 1), Python {m['python']}"]
     width = 1 + max(map(len, [*result["envs"], *result["ratios"]]))
     lines.append(f"{'configuration':<{width}}{'steps/s':>9}{'ms/step':>9}{'episodes':>9}"
-                 f"{'× CarRacing':>13}")
+                 f"{'× CarRacing':>13}{'ms/reset':>10}")
     for name, r in result["envs"].items():
         if isinstance(r, str):
             lines.append(f"{name:<{width}}{r}")
         else:
+            reset = r.get("ms_per_reset")
             lines.append(f"{name:<{width}}{r['steps_per_s']:>9.0f}{r['ms_per_step']:>9.3f}"
                          f"{r['episodes']:>9.0f}"
-                         f"{r.get('ratio_to_car_racing', float('nan')):>12.2f}×")
+                         f"{r.get('ratio_to_car_racing', float('nan')):>12.2f}×"
+                         f"{'–' if reset is None else f'{reset:.3f}':>10}")
     for name, ratio in result["ratios"].items():
         lines.append(f"{name:<{width}}{ratio:>9.2f}")
     return "\n".join(lines)

@@ -38,7 +38,21 @@ def test_bench_env_reports_every_configuration_against_car_racing() -> None:
     assert set(result["ratios"]) == {"make_vec 2 envs / 1 env",
                                      "2 processes at once / 1 (the machine's ceiling)",
                                      "2 processes, each at its own pace / 1",
-                                     "generated / fixed track (lanes)"}
+                                     "generated / fixed track (lanes)",
+                                     "generated / fixed track (lanes), resets off the clock"}
+    # A single env's resets are clocked apart: a part of its time, so its steps alone
+    # are faster than its steps with resets; the ratio without them is theirs.
+    for name in ("lanes, fixed track (oval)", "lanes, new generated track per reset"):
+        r = envs[name]
+        assert r["episodes"] > 1, "these seeds reset within 40 steps: the case to test"
+        assert r["ms_per_reset"] > 0 and r["steps_per_s_without_resets"] > r["steps_per_s"]
+        resets_ms = r["ms_per_reset"] * (r["episodes"] - 1)
+        assert resets_ms < 40 * r["ms_per_step"]  # the resets fit in the steps' time
+        assert 40 / (40 * r["ms_per_step"] - resets_ms) * 1000 == pytest.approx(
+            r["steps_per_s_without_resets"])
+    assert result["ratios"]["generated / fixed track (lanes), resets off the clock"] == (
+        pytest.approx(envs["lanes, new generated track per reset"]["steps_per_s_without_resets"]
+                      / envs["lanes, fixed track (oval)"]["steps_per_s_without_resets"]))
     # A process's own stepping time is part of its turn's wall clock: at their own pace
     # the two are at least as fast as in turns that wait for the slower one.
     pair = envs["2 processes at once, lanes, generated"]
@@ -67,16 +81,19 @@ def test_bench_env_reports_every_configuration_against_car_racing() -> None:
     rows = {line.split("  ", 1)[0]: line for line in lines[2:]}
     assert set(rows) == set(envs) | set(result["ratios"])
     name = "2 processes at once, each at its own pace"
-    assert rows[name].split()[-4:] == [f"{envs[name]['steps_per_s']:.0f}",
+    assert rows[name].split()[-5:] == [f"{envs[name]['steps_per_s']:.0f}",
                                        f"{envs[name]['ms_per_step']:.3f}",
                                        f"{envs[name]['episodes']:.0f}",
-                                       f"{envs[name]['ratio_to_car_racing']:.2f}×"]
+                                       f"{envs[name]['ratio_to_car_racing']:.2f}×", "–"]
+    name = "lanes, new generated track per reset"
+    assert rows[name].split()[-2:] == [f"{envs[name]['ratio_to_car_racing']:.2f}×",
+                                       f"{envs[name]['ms_per_reset']:.3f}"]
     for ratio, value in result["ratios"].items():
         assert rows[ratio].split()[-1] == f"{value:.2f}"
-    # right-aligned numbers: a ratio row ends where the steps/s column does (31 chars before)
+    # right-aligned numbers: a ratio row ends where the steps/s column does (41 chars before)
     ends = {len(line) for line in lines[2:2 + len(envs)]}
     assert len(ends) == 1 and {len(line) for line in lines[2 + len(envs):]} == {
-        ends.pop() - 31}
+        ends.pop() - 41}
 
 
 def test_bench_candidates_finds_the_kernels_identical() -> None:
@@ -309,9 +326,47 @@ def test_single_envs_and_the_reference_step_in_the_same_rounds(monkeypatch) -> N
     assert turns == [("ref", 3), ("env", 300), ("ref", 3), ("env", 300), ("ref", 3),
                      ("env", 300), ("ref", 1), ("env", 300)]
     assert {r["episodes"] for r in result.values()} == {1}
+    assert {r["ms_per_reset"] for r in result.values()} == {None}  # no reset to time
     with pytest.raises(ValueError, match="at least one step"):
         bench_env.interleaved_steps_per_second({"ref": recorder("ref")}, steps, quiet=True,
                                                totals={"ref": 0})
+
+
+def test_single_envs_resets_are_clocked_apart(monkeypatch) -> None:
+    """A single env's resets are timed on their own: the mean reset, and the rate of its
+    steps without them (what free resets would give), from a stand-in whose episodes end
+    every 50 steps and whose resets take ≥ 10 ms."""
+    import time
+
+    import gymnasium as gym
+    import numpy as np
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    import bench_env
+
+    class SlowResets:
+        action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+        steps = 0
+
+        def reset(self, *, seed: int | None = None) -> None:
+            time.sleep(0.010)
+
+        def step(self, action: np.ndarray) -> tuple:
+            self.steps += 1
+            return None, 0.0, self.steps % 50 == 0, False, {}
+
+        def close(self) -> None:
+            pass
+
+    steps = bench_env.CHUNK_STEPS
+    r = bench_env.interleaved_steps_per_second({"env": SlowResets}, steps, quiet=True)["env"]
+    # 20 warm-up steps, then 300: episodes end at steps 50, 100, …, 300 of the env's count
+    assert r["episodes"] == 1 + (bench_env.WARMUP_STEPS + steps) // 50
+    assert r["ms_per_reset"] >= 10.0
+    resets_s = r["ms_per_reset"] * (r["episodes"] - 1) / 1000
+    assert steps / r["steps_per_s"] - resets_s == pytest.approx(
+        steps / r["steps_per_s_without_resets"])
+    assert r["steps_per_s_without_resets"] > 2 * r["steps_per_s"]  # resets dominate here
 
 
 def test_bench_kernel_ab_swaps_a_revisions_kernels_into_env_steps() -> None:
