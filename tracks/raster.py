@@ -765,17 +765,20 @@ def _any_tile(todo: np.ndarray, tile: int, r_lo: int, r_hi: int, c_lo: int, c_hi
     return False
 
 
-def untouched_zeros(shape: tuple[int, ...], memory: mmap.mmap | None = None) -> np.ndarray:
+def untouched_zeros(shape: tuple[int, ...], memory: mmap.mmap | None = None, *,
+                    reserve_bytes: int = 0) -> np.ndarray:
     """A uint8 array of zeros whose pages cost nothing until written: anonymous memory
     straight from the kernel. (``np.zeros`` is calloc, and once large blocks have been
     freed, glibc serves the next ones from its heap and clears them in full.)
 
     ``memory``: all-zero anonymous memory to take instead of new memory if it is large
     enough (its pages already written once cost no page fault again, ~1.5 µs each here);
-    the caller hands it over (see ``memory_of``)."""
+    the caller hands it over (see ``memory_of``). ``reserve_bytes``: new memory is at
+    least this large, for a caller that hands it on to larger arrays later (address space
+    only: a page never written costs nothing)."""
     size = max(1, math.prod(shape))
     if memory is None or len(memory) < size:
-        memory = mmap.mmap(-1, size)
+        memory = mmap.mmap(-1, max(size, reserve_bytes))
     return np.frombuffer(memory, np.uint8, math.prod(shape)).reshape(shape)
 
 

@@ -46,6 +46,16 @@ TILE_TEXELS: int = TILE_PX
 """Edge of a level-0 tile of a lazy scene's atlas [texels] (the marking map's tile);
 level L's tiles cover the same ground, ``max(1, TILE_TEXELS >> L)`` texels."""
 
+ATLAS_RESERVE_BYTES: int = 32 << 20
+"""Smallest memory [bytes] a lazy scene's atlas takes when it needs new memory: the env
+hands an atlas's memory on to the next track's scene (``build_scene(reuse=…)``), whose
+already written pages cost no page fault (≈ 2 µs per 4 KiB page here), but memory too
+small for a larger atlas is replaced, and every page of the new one faults again. The
+default generated tracks' atlases take 5.5–29.1 MiB (median 9.5; seeds 0–999): in a
+random order each new largest one replaced the memory (8–14 times per process in 24,000
+steps of a 2-env vector env, whose envs keep two memories each). Address space only:
+pages never written cost nothing, so this reserve costs no memory."""
+
 MAX_ATLAS_SIDE_TEXELS: int = 32767
 """Longest side of the mip atlas [texels]: OpenCV's remap needs images below
 32767 × 32767 (a documented limitation; 131 m of mat at 4 mm per texel)."""
@@ -827,7 +837,7 @@ def build_scene(track: Track, effects: Effects | None = None,
                 and not (reuse.track is track or reuse.track == track)):
             memory = reuse.tiles.retire()
         # Unfilled tiles and walls cost nothing; retired memory is all zeros again.
-        atlas = untouched_zeros((height, width), memory)
+        atlas = untouched_zeros((height, width), memory, reserve_bytes=ATLAS_RESERVE_BYTES)
         origins = np.array(level_xy, np.float32)
         in_atlas = False
         if marking is None:

@@ -13,6 +13,7 @@ import pytest
 from tests.conftest import generated
 from tfalda_sim.rendering import DomainRandomization, Effects, Renderer, build_scene
 from tfalda_sim.rendering.scene import (
+    ATLAS_RESERVE_BYTES,
     MipTiles,
     _atlas,
     _atlas_layout,
@@ -371,8 +372,7 @@ def test_a_retired_scene_hands_over_all_zero_memory_and_cannot_render(
     new = build_scene(new_track, Effects(), reuse=old)
     assert old.tiles.retired
     assert not np.frombuffer(memory, np.uint8).any()  # nothing painted by the new one yet
-    if len(memory) >= new.atlas.size:
-        assert memory_of(new.atlas) is memory
+    assert memory_of(new.atlas) is memory  # room enough: ``ATLAS_RESERVE_BYTES``
     with pytest.raises(RuntimeError, match="retired"):
         renderer.render_windows(old, _poses(old_track, 1, 2)[0], ROIS)
     with pytest.raises(RuntimeError, match="retired"):
@@ -386,6 +386,36 @@ def test_a_retired_scene_hands_over_all_zero_memory_and_cannot_render(
     assert not new.tiles.retired and again.tiles.marking is new.tiles.marking
     with pytest.raises(TypeError, match="reuse must be a Scene"):
         build_scene(new_track, reuse="scene")  # type: ignore[arg-type]
+
+
+def test_a_new_atlas_reserves_room_for_the_larger_atlases_that_take_it_over(
+        renderer: Renderer) -> None:
+    """New atlas memory is at least ``ATLAS_RESERVE_BYTES`` (address space, untouched): the
+    scene of a larger track (here 6.4 → 23.3 MiB) takes over the memory its views wrote
+    instead of new memory whose every page faults again, and renders the eager frames."""
+    small, large = generated(17), generated(32)
+    first = build_scene(small, Effects())
+    memory = memory_of(first.atlas)
+    assert memory is not None and len(memory) >= ATLAS_RESERVE_BYTES > first.atlas.size
+    for k, pose in enumerate(_poses(small, 3, 17)):
+        renderer.render_windows(first, pose, ROIS, frame_seed=k)
+    second = build_scene(large, Effects(), reuse=first)
+    assert first.atlas.size < second.atlas.size <= ATLAS_RESERVE_BYTES
+    assert memory_of(second.atlas) is memory
+    eager = build_scene(large, Effects(), lazy=False)
+    for k, pose in enumerate(_poses(large, 3, 32)):
+        np.testing.assert_array_equal(renderer.render(second, pose, frame_seed=k),
+                                      renderer.render(eager, pose, frame_seed=k))
+
+
+def test_untouched_zeros_takes_memory_it_is_given_or_new_memory_of_the_reserve() -> None:
+    a = untouched_zeros((10, 20), reserve_bytes=4096)
+    memory = memory_of(a)
+    assert a.shape == (10, 20) and not a.any() and len(memory) == 4096
+    assert memory_of(untouched_zeros((64, 64), memory)) is memory  # fits: taken
+    bigger = memory_of(untouched_zeros((65, 64), memory, reserve_bytes=1000))
+    assert bigger is not memory and len(bigger) == 65 * 64  # the size, above the reserve
+    assert len(memory_of(untouched_zeros((3, 3)))) == 9  # no reserve: the size
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
