@@ -1,9 +1,11 @@
 """Benchmark of TfaldaTrack-v0: env steps per second against CarRacing-v3, one run.
 
-    python benchmarks/bench_env.py [--steps 3000] [--json]
+    python benchmarks/bench_env.py [--steps 3000] [--warmup-steps 6000] [--json]
 
 In one run, with uniformly random actions and resets included (random steering leaves the
-road every ≈ 50 steps, so a reset's cost counts):
+road every ≈ 50 steps, so a reset's cost counts), each of our envs timed after
+``WARMUP_STEPS`` steps (the steady state of a training run; ``--warmup-steps 20``: a fresh
+process's first seconds):
 
 - Gymnasium's CarRacing-v3, the reference every other figure is divided by (this VM's
   speed drifts by 2× within a day; the ratio does not), stepped in turns with the single
@@ -76,7 +78,19 @@ SCALING_CEILING = "2 processes at once / 1 (the machine's ceiling)"
 OWN_PACE_CEILING = "2 processes, each at its own pace / 1"
 GENERATED_FIXED = "generated / fixed track (lanes)"
 GENERATED_FIXED_NO_RESETS = "generated / fixed track (lanes), resets off the clock"
-WARMUP_STEPS = 20  # JIT compilation, caches
+WARMUP_STEPS = 6000
+"""Steps each of our envs (a single env, or a stream of a vector configuration or of the
+ceiling) makes before it is timed (``--warmup-steps``): a training run steps for minutes,
+and the figures are its steady state, not a fresh process's first seconds. A new env's
+scenes page their atlas memory in as tracks are painted into it (≈ 2 µs a page fault
+here), one memory per env, two per env of a 2-env vector env (one for the scene it
+prepares): a fresh 2-env vector env's own process faulted ≈ 7600 pages in its first
+3000 env steps, ≈ 600 in the next 3000; and the vector envs' and the ceiling's worker
+processes are fresh. ``--warmup-steps 20`` measures the cold start."""
+
+REFERENCE_WARMUP_STEPS = 20
+"""CarRacing-v3's warm-up: its rate is flat from the first hundred steps on (ten turns of
+200 steps after these 20: 243–279 steps/s, no trend), and its steps are ≈ 15× ours."""
 
 
 def steps_per_second(env: gym.Env, steps: int, desc: str, quiet: bool) -> dict[str, float]:
@@ -94,18 +108,21 @@ single envs' turns."""
 
 
 def interleaved_steps_per_second(makes: dict[str, Callable[[], gym.Env]], steps: int,
-                                 quiet: bool, totals: dict[str, int] | None = None
+                                 quiet: bool, totals: dict[str, int] | None = None,
+                                 warmups: dict[str, int] | None = None
                                  ) -> dict[str, dict[str, float | None]]:
     """Random-policy steps/s of several envs at once (resets included): each warmed up by
-    ``WARMUP_STEPS`` steps, reset with seed 1, then all stepped in rounds, one turn each,
-    until each has made its steps (``steps``, or ``totals[name]``); an env's time is the
-    sum of its turns, of which its resets' share is clocked too (``ms_per_reset``, a
-    reset's mean, None without one; ``steps_per_s_without_resets``, the rate of its steps
-    alone: what free resets would give). There are as many rounds as ``steps`` has turns
-    of ``CHUNK_STEPS``, and an env with other ``totals`` spreads its steps over the same
-    rounds (a slower reference makes fewer steps, in the same minutes as the others: the
-    host's drift stays out of their ratios)."""
+    ``warmups[name]`` steps (``WARMUP_STEPS`` if not given; an episode's end resets it),
+    reset with seed 1, then all stepped in rounds, one turn each, until each has made its
+    steps (``steps``, or ``totals[name]``); an env's time is the sum of its turns, of which
+    its resets' share is clocked too (``ms_per_reset``, a reset's mean, None without one;
+    ``steps_per_s_without_resets``, the rate of its steps alone: what free resets would
+    give). There are as many rounds as ``steps`` has turns of ``CHUNK_STEPS``, and an env
+    with other ``totals`` spreads its steps over the same rounds (a slower reference makes
+    fewer steps, in the same minutes as the others: the host's drift stays out of their
+    ratios)."""
     totals = {name: (totals or {}).get(name, steps) for name in makes}
+    warmups = {name: (warmups or {}).get(name, WARMUP_STEPS) for name in makes}
     if any(n < 1 for n in totals.values()):
         raise ValueError(f"every env needs at least one step, got {totals}")
     rounds = -(-steps // CHUNK_STEPS)
@@ -120,8 +137,10 @@ def interleaved_steps_per_second(makes: dict[str, Callable[[], gym.Env]], steps:
             envs[name] = env = make()
             env.action_space.seed(0)
             env.reset(seed=0)
-            for _ in range(WARMUP_STEPS):
-                env.step(env.action_space.sample())
+            for _ in range(warmups[name]):
+                _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+                if terminated or truncated:
+                    env.reset()
             env.reset(seed=1)
         with tqdm(total=sum(totals.values()), desc=" + ".join(envs), disable=quiet,
                   file=sys.stderr) as bar:
@@ -211,7 +230,7 @@ class _VectorTurns:
     """Vector envs that together step the ``STREAMS`` streams (env i of the
     concatenation: stream i), in turns (``interleaved_vector_steps_per_second``)."""
 
-    def __init__(self, venvs: list[gym.vector.VectorEnv]) -> None:
+    def __init__(self, venvs: list[gym.vector.VectorEnv], warmup: int) -> None:
         self.venvs = venvs
         try:
             first = 0
@@ -227,7 +246,7 @@ class _VectorTurns:
             forget_shared_tracks()
             for venv, streams in zip(venvs, self.streams, strict=True):
                 venv.reset(seed=streams.start)
-            self._step(WARMUP_STEPS)
+            self._step(warmup)
         except BaseException:
             self.close()
             raise
@@ -256,10 +275,11 @@ class _VectorTurns:
                 venv.close()
 
 
-def _solo_process(conn: Connection, cpu: int | None, streams: list[int]) -> None:
+def _solo_process(conn: Connection, cpu: int | None, streams: list[int], warmup: int
+                  ) -> None:
     """Single envs stepping ``streams`` in one process, pinned to ``cpu``, one after
-    another: ``n`` steps of each stream per message ``n`` (0 ends it), answered with
-    (time [s], episodes)."""
+    another: ``warmup`` steps of each (answered with None), then ``n`` steps of each
+    stream per message ``n`` (0 ends it), answered with (time [s], episodes)."""
     if cpu is not None:
         os.sched_setaffinity(0, {cpu})
     cv2.setNumThreads(1)
@@ -281,7 +301,7 @@ def _solo_process(conn: Connection, cpu: int | None, streams: list[int]) -> None
 
     for env, i in zip(envs, streams, strict=True):
         env.reset(seed=i)
-    step(WARMUP_STEPS)
+    step(warmup)
     conn.send(None)
     while n := conn.recv():
         forget_shared_tracks()
@@ -298,7 +318,7 @@ class _SoloProcessTurns:
     vector env; with 1, the same streams one after another. A turn lasts until the slower
     process is done."""
 
-    def __init__(self, n: int, cpus: list[int] | None) -> None:
+    def __init__(self, n: int, cpus: list[int] | None, warmup: int) -> None:
         ctx = multiprocessing.get_context("spawn")
         self.num_envs = STREAMS
         self.own_s = [0.0] * n  # each process's own stepping time [s]
@@ -311,7 +331,8 @@ class _SoloProcessTurns:
                 parent, child = ctx.Pipe()
                 cpu = cpus[i % len(cpus)] if cpus else None
                 proc = ctx.Process(target=_solo_process,
-                                   args=(child, cpu, self.per_process[i]), daemon=True)
+                                   args=(child, cpu, self.per_process[i], warmup),
+                                   daemon=True)
                 proc.start()
                 child.close()  # the child's end is the child's: its death reads as EOF here
                 self.conns.append(parent)
@@ -357,20 +378,22 @@ class _SoloProcessTurns:
 
 
 def interleaved_vector_steps_per_second(makes: dict[str, Callable[[], Any]], steps: int,
-                                        quiet: bool) -> dict[str, dict[str, float]]:
-    """Env steps/s of several configurations that each step the ``STREAMS`` streams
-    (autoreset inside): each made, reset and warmed up (``WARMUP_STEPS`` steps a
-    stream), then all stepped in turns of about ``CHUNK_STEPS`` env steps
-    (``CHUNK_STEPS // STREAMS`` steps a stream) until each has made about ``steps``; one's
-    time is the sum of its turns. ``makes`` give a list of vector envs holding
-    ``STREAMS`` envs together (``_VectorTurns``), or a ``_SoloProcessTurns``. Idle vector
-    envs' workers sleep on their pipes (waking every ``BOARD_NAP_S``), so a turn has the
-    machine to itself."""
+                                        quiet: bool, warmup: int = WARMUP_STEPS
+                                        ) -> dict[str, dict[str, float]]:
+    """Env steps/s of several configurations that each step the ``STREAMS`` streams (autoreset
+    inside): each made, reset and warmed up (``warmup`` steps a stream; a
+    ``_SoloProcessTurns`` is made warmed up), then all stepped in turns of about
+    ``CHUNK_STEPS`` env steps (``CHUNK_STEPS // STREAMS`` steps a stream) until each has
+    made about ``steps``; one's time is the sum of its turns. ``makes`` give a list of
+    vector envs holding ``STREAMS`` envs together (``_VectorTurns``), or a
+    ``_SoloProcessTurns``. Idle vector envs' workers sleep on their pipes (waking every
+    ``BOARD_NAP_S``), so a turn has the machine to itself."""
     runners: dict[str, Any] = {}
     try:
         for name, make in makes.items():
             made = make()
-            runners[name] = made if isinstance(made, _SoloProcessTurns) else _VectorTurns(made)
+            runners[name] = (made if isinstance(made, _SoloProcessTurns)
+                             else _VectorTurns(made, warmup))
         calls = max(1, steps // STREAMS)
         done = dict.fromkeys(runners, 0)
         clock = dict.fromkeys(runners, 0.0)
@@ -399,7 +422,9 @@ def interleaved_vector_steps_per_second(makes: dict[str, Callable[[], Any]], ste
     return results
 
 
-def run(steps: int, quiet: bool) -> dict[str, Any]:
+def run(steps: int, quiet: bool, warmup: int = WARMUP_STEPS) -> dict[str, Any]:
+    """Every configuration, each after ``warmup`` steps (an env, a stream; the reference
+    ``REFERENCE_WARMUP_STEPS``), then ``steps``."""
     all_cpus = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
     results: dict[str, dict[str, float] | str] = {}
 
@@ -424,8 +449,9 @@ def run(steps: int, quiet: bool) -> dict[str, Any]:
     except Exception as exc:  # the reference may be missing: say so in the table
         results[REFERENCE] = f"not available: {type(exc).__name__}: {exc}"
         del singles[REFERENCE]
+    warmups = {name: warmup for name in singles} | {REFERENCE: REFERENCE_WARMUP_STEPS}
     results.update(interleaved_steps_per_second(singles, steps, quiet,
-                                                {REFERENCE: reference_steps}))
+                                                {REFERENCE: reference_steps}, warmups))
     results = {REFERENCE: results[REFERENCE],
                **{k: v for k, v in results.items() if k != REFERENCE}}
     if all_cpus is not None:  # the vector envs get the whole machine
@@ -438,9 +464,9 @@ def run(steps: int, quiet: bool) -> dict[str, Any]:
         "AsyncVectorEnv, 2 envs, lanes, generated":
             lambda: [gym.make_vec("TfaldaTrack-v0", num_envs=STREAMS,
                                   vectorization_mode="async")],
-        CEILING_1: lambda: _SoloProcessTurns(1, cpus),
-        CEILING_2: lambda: _SoloProcessTurns(2, cpus),
-    }, steps, quiet))
+        CEILING_1: lambda: _SoloProcessTurns(1, cpus, warmup),
+        CEILING_2: lambda: _SoloProcessTurns(2, cpus, warmup),
+    }, steps, quiet, warmup))
     pair = results.get(CEILING_2)
     if isinstance(pair, dict):
         own = pair["own_pace_steps_per_s"]
@@ -471,7 +497,9 @@ def run(steps: int, quiet: bool) -> dict[str, Any]:
                                               / fixed["steps_per_s_without_resets"])
     m = machine()
     m["pinned_to_one_core"] = "single envs only"
-    return {"machine": m, "steps": steps, "envs": results, "ratios": scaling}
+    return {"machine": m, "steps": steps, "warmup_steps": warmup,
+            "reference_warmup_steps": REFERENCE_WARMUP_STEPS, "envs": results,
+            "ratios": scaling}
 
 
 def table(result: dict[str, Any]) -> str:
@@ -480,7 +508,8 @@ def table(result: dict[str, Any]) -> str:
     a vector env's resets are inside its steps), then the ratios."""
     m = result["machine"]
     lines = [f"machine: {m['cores']} cores of {m['cpu']} ({m['simd']}; single envs pinned "
-             f"to one, OpenCV threads 1), Python {m['python']}"]
+             f"to one, OpenCV threads 1), Python {m['python']}; {result['steps']} steps "
+             f"after {result['warmup_steps']} warm-up steps per env"]
     width = 1 + max(map(len, [*result["envs"], *result["ratios"]]))
     lines.append(f"{'configuration':<{width}}{'steps/s':>9}{'ms/step':>9}{'episodes':>9}"
                  f"{'× CarRacing':>13}{'ms/reset':>10}")
@@ -501,11 +530,16 @@ def table(result: dict[str, Any]) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=3000, help="env steps per configuration")
+    parser.add_argument("--warmup-steps", type=int, default=WARMUP_STEPS,
+                        help="steps each env (a vector configuration: each stream) makes "
+                             "before it is timed; 20 measures the cold start")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)
     if args.steps < 1:
         parser.error("--steps must be ≥ 1")
-    result = run(args.steps, quiet=args.json)
+    if args.warmup_steps < 0:
+        parser.error("--warmup-steps must be ≥ 0")
+    result = run(args.steps, quiet=args.json, warmup=args.warmup_steps)
     if args.json:
         print(json.dumps(result))
         return 0

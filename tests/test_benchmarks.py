@@ -23,7 +23,9 @@ def run_json(script: str, *args: str) -> dict:
 
 
 def test_bench_env_reports_every_configuration_against_car_racing() -> None:
-    result = run_json("bench_env.py", "--steps", "40")
+    result = run_json("bench_env.py", "--steps", "40", "--warmup-steps", "20")
+    assert (result["steps"], result["warmup_steps"], result["reference_warmup_steps"]) == (
+        40, 20, 20)
     envs = result["envs"]
     reference = envs["CarRacing-v3 (reference)"]
     assert isinstance(reference, dict), reference  # Box2D is installed (dev extra)
@@ -77,7 +79,7 @@ def test_bench_env_reports_every_configuration_against_car_racing() -> None:
     finally:
         sys.path.remove(str(BENCHMARKS))
     lines = bench_env.table(result).splitlines()
-    assert machine["cpu"] in lines[0]
+    assert machine["cpu"] in lines[0] and "40 steps after 20 warm-up steps per env" in lines[0]
     rows = {line.split("  ", 1)[0]: line for line in lines[2:]}
     assert set(rows) == set(envs) | set(result["ratios"])
     name = "2 processes at once, each at its own pace"
@@ -94,6 +96,17 @@ def test_bench_env_reports_every_configuration_against_car_racing() -> None:
     ends = {len(line) for line in lines[2:2 + len(envs)]}
     assert len(ends) == 1 and {len(line) for line in lines[2 + len(envs):]} == {
         ends.pop() - 41}
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (("--steps", "0"), "--steps must be ≥ 1"),
+    (("--warmup-steps", "-1"), "--warmup-steps must be ≥ 0"),
+    (("--warmup-steps", "many"), "invalid int value"),
+])
+def test_bench_env_names_bad_arguments(args: tuple[str, ...], message: str) -> None:
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_env.py"), *args],
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 2 and message in done.stderr and "Traceback" not in done.stderr
 
 
 def test_bench_candidates_finds_the_kernels_identical() -> None:
@@ -230,10 +243,11 @@ def test_vector_configurations_and_the_ceiling_step_the_same_streams(monkeypatch
     monkeypatch.setattr(bench_env, "forget_shared_tracks",
                         lambda: (events.append("forget"), real_forget()))
     steps = 2 * bench_env.CHUNK_STEPS + 10
+    warmup = 25
     result = bench_env.interleaved_vector_steps_per_second(
         {"two": lambda: [vector("two", 0, 2)],
          "ones": lambda: [vector("ones", 0, 1), vector("ones", 1, 1)]},
-        steps=steps, quiet=True)
+        steps=steps, quiet=True, warmup=warmup)
     assert set(result) == {"two", "ones"}
     # Each set-up and each turn (a turn of CHUNK_STEPS env steps, another, the last 10)
     # drops the caches before its steps, and only then.
@@ -248,7 +262,8 @@ def test_vector_configurations_and_the_ceiling_step_the_same_streams(monkeypatch
         StandIn(logs.setdefault("solo", {}).setdefault(len(made), []))) or made[-1])
     monkeypatch.setattr(bench_env.cv2, "setNumThreads", lambda n: None)
     here, there = Pipe()
-    loop = threading.Thread(target=bench_env._solo_process, args=(there, None, [0, 1]))
+    loop = threading.Thread(target=bench_env._solo_process,
+                            args=(there, None, [0, 1], warmup))
     loop.start()
     assert here.recv() is None  # warmed up
     episodes = 0
@@ -266,7 +281,7 @@ def test_vector_configurations_and_the_ceiling_step_the_same_streams(monkeypatch
     for i in range(bench_env.STREAMS):
         stream = logs["two"][i]
         assert stream[0] == ("reset", i)
-        assert len(stream) == 1 + bench_env.WARMUP_STEPS + steps // 2
+        assert len(stream) == 1 + warmup + steps // 2
         actions = np.array([v for v in stream if isinstance(v, float)])
         assert np.all(np.abs(actions) <= 1.0) and np.std(actions) > 0.3  # uniform on [-1, 1]
         assert stream.count(("reset", None)) >= steps // 2 // (EPISODE_STEPS + 1) - 1
@@ -317,9 +332,9 @@ def test_single_envs_and_the_reference_step_in_the_same_rounds(monkeypatch) -> N
     steps = 4 * bench_env.CHUNK_STEPS  # four rounds
     result = bench_env.interleaved_steps_per_second(
         {"ref": recorder("ref"), "env": recorder("env")}, steps, quiet=True,
-        totals={"ref": 10})
-    warm = bench_env.WARMUP_STEPS
-    timed = log[2 * warm:]
+        totals={"ref": 10}, warmups={"ref": 3, "env": 7})
+    assert log[:10] == ["ref"] * 3 + ["env"] * 7  # each warmed up by its own count
+    timed = log[10:]
     assert timed.count("ref") == 10 and timed.count("env") == steps
     # turns in rounds: ref, env, ref, env, … — the reference's 10 steps in four turns
     turns = [(name, len(list(run))) for name, run in itertools.groupby(timed)]
@@ -358,10 +373,11 @@ def test_single_envs_resets_are_clocked_apart(monkeypatch) -> None:
         def close(self) -> None:
             pass
 
-    steps = bench_env.CHUNK_STEPS
-    r = bench_env.interleaved_steps_per_second({"env": SlowResets}, steps, quiet=True)["env"]
+    steps, warmup = bench_env.CHUNK_STEPS, 20
+    r = bench_env.interleaved_steps_per_second({"env": SlowResets}, steps, quiet=True,
+                                               warmups={"env": warmup})["env"]
     # 20 warm-up steps, then 300: episodes end at steps 50, 100, …, 300 of the env's count
-    assert r["episodes"] == 1 + (bench_env.WARMUP_STEPS + steps) // 50
+    assert r["episodes"] == 1 + (warmup + steps) // 50
     assert r["ms_per_reset"] >= 10.0
     resets_s = r["ms_per_reset"] * (r["episodes"] - 1) / 1000
     assert steps / r["steps_per_s"] - resets_s == pytest.approx(
