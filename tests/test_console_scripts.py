@@ -196,8 +196,9 @@ def test_camera_fit(tmp_path: Path) -> None:
     assert_png(tmp_path / "car-fit.png", (480, 752, 3))
     shown = tfalda("camera", "show", "car.yaml", "--json", cwd=tmp_path).json()
     reference = tfalda("camera", "show", "reference-car", "--json", cwd=tmp_path).json()
-    assert shown["mount"] == reference["mount"] and shown["camera_matrix"] == \
-        reference["camera_matrix"]
+    # the fit's numbers, to the last bits another numpy/OpenCV release may change
+    assert shown["mount"] == pytest.approx(reference["mount"], rel=1e-9, abs=1e-12)
+    assert np.allclose(shown["camera_matrix"], reference["camera_matrix"], rtol=1e-9)
     # exists → --force; contradictory flags, bad input: one line, exit 2, nothing written
     again = tfalda("camera", "fit", frame, "--fit-focal", "--out", "car.yaml", cwd=tmp_path,
                    code=2)

@@ -3,6 +3,7 @@ reference frame, the console command, and frames it must refuse."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -89,7 +90,11 @@ def test_reference_car_profile_is_the_fit_of_the_reference_frame() -> None:
     fit = fit_focal(frame, 752, 480)
     ref = load_camera("reference-car")
     assert fit.residual_px < 1.0
-    assert np.allclose(fit.camera.K, ref.K) and fit.camera.mount == ref.mount
+    # The profile holds the fit's numbers; a fit with other releases of numpy/OpenCV may
+    # differ in the last bits (roll 1 ulp apart with numpy 2.4.6, OpenCV 5.1.0).
+    assert np.allclose(fit.camera.K, ref.K)
+    assert dataclasses.astuple(fit.camera.mount) == pytest.approx(
+        dataclasses.astuple(ref.mount), rel=1e-9, abs=1e-12)
     assert np.allclose(detect_bonnet(frame), ref.bonnet.polygon_px)
 
 
