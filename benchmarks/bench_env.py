@@ -5,7 +5,7 @@
 In one run, with uniformly random actions and resets included (random steering leaves the
 road every ≈ 50 steps, so a reset's cost counts), each of our envs timed after
 ``WARMUP_STEPS`` steps (the steady state of a training run; ``--warmup-steps 20``: a fresh
-process's first seconds):
+process's first seconds), the reference after ``REFERENCE_WARMUP_STEPS``:
 
 - Gymnasium's CarRacing-v3, the reference every other figure is divided by (this VM's
   speed drifts by 2× within a day; the ratio does not), stepped in turns with the single
@@ -82,10 +82,10 @@ WARMUP_STEPS = 6000
 """Steps each of our envs (a single env, or a stream of a vector configuration or of the
 ceiling) makes before it is timed (``--warmup-steps``): a training run steps for minutes,
 and the figures are its steady state, not a fresh process's first seconds. A new env's
-scenes page their atlas memory in as tracks are painted into it (≈ 2 µs a page fault
-here), one memory per env, two per env of a 2-env vector env (one for the scene it
-prepares): a fresh 2-env vector env's own process faulted ≈ 7600 pages in its first
-3000 env steps, ≈ 600 in the next 3000; and the vector envs' and the ceiling's worker
+scenes page their atlas memory in as tracks are painted into it (a page fault per 4 KiB
+page written first), one memory per env, two per env of a 2-env vector env (one for the
+scene it prepares): a fresh 2-env vector env's own process faulted 6980–7660 pages in
+its first 3000 env steps, ≈ 600 in the next 3000; and the vector envs' and the ceiling's worker
 processes are fresh. ``--warmup-steps 20`` measures the cold start."""
 
 REFERENCE_WARMUP_STEPS = 20
@@ -120,7 +120,9 @@ def interleaved_steps_per_second(makes: dict[str, Callable[[], gym.Env]], steps:
     give). There are as many rounds as ``steps`` has turns of ``CHUNK_STEPS``, and an env
     with other ``totals`` spreads its steps over the same rounds (a slower reference makes
     fewer steps, in the same minutes as the others: the host's drift stays out of their
-    ratios)."""
+    ratios). What envs of this process share between resets (``forget_shared_tracks``) is
+    dropped before every turn: envs of the same seeds draw the same tracks (the "lanes"
+    and "image" envs on generated tracks), and the second would find the first's."""
     totals = {name: (totals or {}).get(name, steps) for name in makes}
     warmups = {name: (warmups or {}).get(name, WARMUP_STEPS) for name in makes}
     if any(n < 1 for n in totals.values()):
@@ -147,6 +149,7 @@ def interleaved_steps_per_second(makes: dict[str, Callable[[], gym.Env]], steps:
             while any(done[name] < totals[name] for name in envs):
                 for name, env in envs.items():
                     n = min(turn[name], totals[name] - done[name])
+                    forget_shared_tracks()  # the same seeds draw the same tracks
                     t0 = time.perf_counter()
                     for _ in range(n):
                         _, _, terminated, truncated, _ = env.step(env.action_space.sample())
@@ -320,6 +323,7 @@ class _SoloProcessTurns:
 
     def __init__(self, n: int, cpus: list[int] | None, warmup: int) -> None:
         ctx = multiprocessing.get_context("spawn")
+        self.warmup = warmup  # steps each stream made before its first turn
         self.num_envs = STREAMS
         self.own_s = [0.0] * n  # each process's own stepping time [s]
         self.steps_each = [0] * n  # env steps each process made
@@ -392,6 +396,10 @@ def interleaved_vector_steps_per_second(makes: dict[str, Callable[[], Any]], ste
     try:
         for name, make in makes.items():
             made = make()
+            if isinstance(made, _SoloProcessTurns) and made.warmup != warmup:
+                made.close()
+                raise ValueError(f"{name}: its processes warmed up {made.warmup} steps a "
+                                 f"stream, the others {warmup}: the streams would differ")
             runners[name] = (made if isinstance(made, _SoloProcessTurns)
                              else _VectorTurns(made, warmup))
         calls = max(1, steps // STREAMS)
@@ -509,7 +517,8 @@ def table(result: dict[str, Any]) -> str:
     m = result["machine"]
     lines = [f"machine: {m['cores']} cores of {m['cpu']} ({m['simd']}; single envs pinned "
              f"to one, OpenCV threads 1), Python {m['python']}; {result['steps']} steps "
-             f"after {result['warmup_steps']} warm-up steps per env"]
+             f"after {result['warmup_steps']} warm-up steps per env or stream "
+             f"(CarRacing-v3: {result['reference_warmup_steps']})"]
     width = 1 + max(map(len, [*result["envs"], *result["ratios"]]))
     lines.append(f"{'configuration':<{width}}{'steps/s':>9}{'ms/step':>9}{'episodes':>9}"
                  f"{'× CarRacing':>13}{'ms/reset':>10}")
@@ -531,8 +540,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=3000, help="env steps per configuration")
     parser.add_argument("--warmup-steps", type=int, default=WARMUP_STEPS,
-                        help="steps each env (a vector configuration: each stream) makes "
-                             "before it is timed; 20 measures the cold start")
+                        help="steps each of our envs (a vector configuration: each stream) "
+                             "makes before it is timed; 20 measures the cold start "
+                             f"(CarRacing-v3: always {REFERENCE_WARMUP_STEPS})")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)
     if args.steps < 1:
