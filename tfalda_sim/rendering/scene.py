@@ -53,8 +53,10 @@ already written pages cost no page fault (≈ 2 µs per 4 KiB page here), but me
 small for a larger atlas is replaced, and every page of the new one faults again. The
 default generated tracks' atlases take 5.5–29.1 MiB (median 9.5; seeds 0–999): in a
 random order each new largest one replaced the memory (8–14 times per process in 24,000
-steps of a 2-env vector env, whose envs keep two memories each). Address space only:
-pages never written cost nothing, so this reserve costs no memory."""
+steps of a 2-env vector env, whose envs keep two memories each). Pages never written
+take no memory; the kernel counts the whole reserve in its commit charge
+(``Committed_AS``), which refuses it only under strict overcommit (``vm.overcommit_memory``
+= 2), where each memory counts 32 MiB instead of its atlas's size."""
 
 MAX_ATLAS_SIDE_TEXELS: int = 32767
 """Longest side of the mip atlas [texels]: OpenCV's remap needs images below
