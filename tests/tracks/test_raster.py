@@ -20,6 +20,7 @@ from tfalda_sim.tracks import (
     rasterize,
 )
 from tfalda_sim.tracks.dimensions import LINE_WIDTH_M
+from tfalda_sim.tracks.raster import memory_of, untouched_zeros
 
 
 def strip(heading: float = 0.0, **kw) -> Track:
@@ -424,3 +425,13 @@ def test_a_detached_map_paints_fresh_zeros_mapped_when_asked() -> None:
     fresh.paint_level0(tiles)
     np.testing.assert_array_equal(tiled.intensity, fresh.intensity)
     np.testing.assert_array_equal(old, fresh.intensity)
+
+
+def test_untouched_zeros_takes_memory_it_is_given_or_new_memory_of_the_reserve() -> None:
+    a = untouched_zeros((10, 20), reserve_bytes=4096)
+    memory = memory_of(a)
+    assert a.shape == (10, 20) and not a.any() and len(memory) == 4096
+    assert memory_of(untouched_zeros((64, 64), memory)) is memory  # fits: taken
+    bigger = memory_of(untouched_zeros((65, 64), memory, reserve_bytes=1000))
+    assert bigger is not memory and len(bigger) == 65 * 64  # the size, above the reserve
+    assert len(memory_of(untouched_zeros((3, 3)))) == 9  # no reserve: the size

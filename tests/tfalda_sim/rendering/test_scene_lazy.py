@@ -408,16 +408,6 @@ def test_a_new_atlas_reserves_room_for_the_larger_atlases_that_take_it_over(
                                       renderer.render(eager, pose, frame_seed=k))
 
 
-def test_untouched_zeros_takes_memory_it_is_given_or_new_memory_of_the_reserve() -> None:
-    a = untouched_zeros((10, 20), reserve_bytes=4096)
-    memory = memory_of(a)
-    assert a.shape == (10, 20) and not a.any() and len(memory) == 4096
-    assert memory_of(untouched_zeros((64, 64), memory)) is memory  # fits: taken
-    bigger = memory_of(untouched_zeros((65, 64), memory, reserve_bytes=1000))
-    assert bigger is not memory and len(bigger) == 65 * 64  # the size, above the reserve
-    assert len(memory_of(untouched_zeros((3, 3)))) == 9  # no reserve: the size
-
-
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_scenes_reusing_retired_memory_all_render_the_eager_frames(renderer: Renderer,
                                                                    seed: int) -> None:
