@@ -772,10 +772,10 @@ def untouched_zeros(shape: tuple[int, ...], memory: mmap.mmap | None = None, *,
     freed, glibc serves the next ones from its heap and clears them in full.)
 
     ``memory``: all-zero anonymous memory to take instead of new memory if it is large
-    enough (its pages already written once cost no page fault again, ~1.5 µs each here);
+    enough (its pages already written once cost no page fault again, ≈ 2 µs each here);
     the caller hands it over (see ``memory_of``). ``reserve_bytes``: new memory is at
-    least this large, for a caller that hands it on to larger arrays later (address space
-    only: a page never written costs nothing)."""
+    least this large, for a caller that hands it on to larger arrays later (a page never
+    written takes no memory, though all of it counts in the kernel's commit charge)."""
     size = max(1, math.prod(shape))
     if memory is None or len(memory) < size:
         memory = mmap.mmap(-1, max(size, reserve_bytes))

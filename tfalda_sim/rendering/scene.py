@@ -816,7 +816,7 @@ def build_scene(track: Track, effects: Effects | None = None,
     ``reuse``: the scene this one replaces, if the caller is done with it. A lazy scene of
     another track is retired (``MipTiles.retire``: it can no longer render) and the new
     lazy scene takes over its atlas memory: its pages were written once already, and a
-    fresh page costs a page fault (~1.5 µs here, ~0.9 ms of a reset onto a new track).
+    fresh page costs a page fault (≈ 1.5–2 µs here, ~0.9 ms of a reset onto a new track).
     Otherwise ``reuse`` is left as it is. The frames are the same either way."""
     if reuse is not None and not isinstance(reuse, Scene):
         raise TypeError(f"reuse must be a Scene or None, got {type(reuse).__name__}")
