@@ -291,6 +291,41 @@ def test_a_map_without_labels_paints_the_same_intensity() -> None:
             bare.fill_all()
 
 
+def test_crossings_start_lines_and_gaps_paint_without_labels_as_with_them() -> None:
+    """Without labels, the pixels of a chunk with a crossing, a start line or a rule gap
+    take the plain chunk's values where none of those reaches them, and nothing inside a
+    crossing: the same intensity as the labelled map's per-pixel sums, also where the
+    elements straddle a closed track's seam or sit near an open track's ends (whose arc
+    lengths do not wrap), on arcs and straights."""
+    from tests.conftest import generated
+    from tfalda_sim.tracks import Arc, Intersection
+    from tfalda_sim.tracks.raster import TiledMarkingMap
+
+    oval = load_named("oval")
+    total = oval.length_m
+    seam = oval.with_elements(
+        start_line_s_m=total - 0.03,
+        intersections=(Intersection(0.1, 0.1), Intersection(0.5 * total, 0.5 * total)),
+        gaps=(Gap(Line.LEFT, total - 0.2, 0.4), Gap(Line.CENTRE, 3.0, 0.5)))
+    # A crossing near an open strip's start: on a closed track of the same length its
+    # inside would reach round to the other end (here the lines there are painted).
+    open_strip = Track((Straight(2.0), Arc(1.5, 1.2), Straight(1.0)), closed=False,
+                       start_line_s_m=0.05, intersections=(Intersection(0.2, 0.2),),
+                       gaps=(Gap(Line.RIGHT, 4.0, 0.3),))
+    crossings = [generated(s) for s in range(60) if generated(s).intersections][:3]
+    gaps = [generated(s) for s in range(60) if len(generated(s).gaps) >= 2][:3]
+    for track in (seam, open_strip, *crossings, *gaps):
+        labelled = TiledMarkingMap(track)
+        bare = TiledMarkingMap(track, labels=False)
+        everything = np.ones(bare.filled.shape, bool)
+        labelled.fill(everything)
+        bare.fill(everything)
+        np.testing.assert_array_equal(bare.intensity, labelled.intensity)
+    # The strip's far end keeps its lines (a crossing's inside does not wrap round).
+    m = rasterize(open_strip)
+    assert value_at(m, open_strip, open_strip.length_m - 0.1, -open_strip.lane_width_m)[0] == 255
+
+
 def test_tight_and_wide_arcs_are_painted_whole() -> None:
     """The arc chunks' row spans skip only pixels outside the road: a full circle of a
     tight, a medium and a wide radius paints its lines' whole area."""
