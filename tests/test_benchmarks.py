@@ -425,3 +425,28 @@ def test_bench_kernel_ab_names_bad_arguments(args: tuple[str, ...], message: str
                           check=False)
     assert done.returncode == 2
     assert message in done.stderr and "Traceback" not in done.stderr
+
+
+def test_bench_paint_repaints_an_envs_tiles_with_both_revisions() -> None:
+    result = run_json("bench_paint.py", "--rev", "HEAD", "--steps", "150", "--rounds", "2")
+    assert result["identical"] is True
+    assert result["episodes"] >= 1 and result["calls"] >= result["episodes"]
+    assert result["tiles"] >= result["calls"] > 0
+    assert result["before_ms"] > 0 and result["after_ms"] > 0
+    assert result["after_us_per_tile"] == pytest.approx(
+        result["after_ms"] * 1e3 / result["tiles"])
+    q1, q3 = result["ratio_quartiles"]
+    assert 0 < q1 <= result["ratio_after_to_before"] <= q3
+    assert result["machine"]["cores"] >= 1 and result["machine"]["pinned_to_one_core"]
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (("--rev", "no-such-revision"), "give a commit"),
+    (("--rev", "HEAD", "--steps", "0"), "must be ≥ 1"),
+])
+def test_bench_paint_names_bad_arguments(args: tuple[str, ...], message: str) -> None:
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_paint.py"), *args,
+                           "--rounds", "1"], capture_output=True, text=True, timeout=300,
+                          check=False)
+    assert done.returncode == 2
+    assert message in done.stderr and "Traceback" not in done.stderr

@@ -1,0 +1,207 @@
+"""Benchmark of the lazy marking paint (``tfalda_sim.tracks.raster._paint_listed``) on the
+tiles an env really paints: this checkout's kernel against another git revision's, in one
+process, in turns (issue 18: a new generated track's ground is painted as the car comes
+to see it).
+
+    python benchmarks/bench_paint.py --rev REV [--steps 3000] [--rounds 9] [--json]
+
+The work: a "lanes" env on default generated tracks (a new track per reset), uniformly
+random actions from a fixed seed, ``--steps`` steps; after every reset and step the
+level-0 tiles its scene's marking map painted are listed (the reset's first view
+included). Both versions then paint exactly those lists, call by call, into maps of the
+same memory (zeroed between passes, untimed; the memory is written once before, so no
+pass pays its page faults), the version that goes first alternating by round; only the
+kernel calls are timed. Every pass's paint is compared with the other version's: a
+difference is an error (exit 1), since the paint must stay bit-identical.
+
+Both versions are compiled here from source (``cache=False``, as ``bench_kernel_ab.py``
+does): the revision's ``tracks/raster.py`` from ``git show REV:…``. Reported: µs per
+painted tile and per call of each version (medians over rounds) and the median per-round
+ratio after / before, with the core count; a table, or ``--json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from _machine import cpu, pin_to_one_core
+from bench_kernel_ab import AbError, compiled, module_source
+
+MODULE = "tfalda_sim.tracks.raster"
+"""The module whose kernel is compared."""
+
+KERNEL = "_paint_listed"
+"""The kernel a lazy scene's fill calls for its level-0 tiles."""
+
+
+def record(steps: int, quiet: bool) -> list[tuple[Any, list[Any]]]:
+    """``(track, [tile lists])`` per episode of the work (see the module's docstring)."""
+    import gymnasium as gym
+    import numpy as np
+    from tqdm import tqdm
+
+    import tfalda_sim  # noqa: F401  (registers the env)
+
+    env = gym.make("TfaldaTrack-v0")
+    inner = env.unwrapped
+    env.reset(seed=0)
+    actions = np.random.default_rng(0).uniform(-1.0, 1.0, (steps, 1)).astype(np.float32)
+
+    def painted() -> tuple[Any, int]:
+        marking = inner._scene.tiles.marking  # type: ignore[attr-defined]
+        return marking, int(marking._n_record[0])
+
+    episodes: list[tuple[Any, list[Any]]] = []
+    marking, n = painted()
+    lists = [marking._record[:n].copy()]
+    try:
+        for k in tqdm(range(steps), desc="recording", disable=quiet, file=sys.stderr):
+            _, _, terminated, truncated, _ = env.step(actions[k])
+            now, m = painted()
+            if now is marking and m > n:
+                lists.append(marking._record[n:m].copy())
+            marking, n = now, m
+            if terminated or truncated:
+                episodes.append((marking.track, lists))
+                env.reset()
+                marking, n = painted()
+                lists = [marking._record[:n].copy()]
+        episodes.append((marking.track, lists))
+    finally:
+        env.close()
+    return episodes
+
+
+def run(rev: str, steps: int, rounds: int, quiet: bool) -> dict[str, Any]:
+    import numpy as np
+    from tqdm import tqdm
+
+    current, old_source = module_source(MODULE, rev)
+    kernels = {
+        "before": getattr(compiled(current, old_source, "before"), KERNEL, None),
+        "after": getattr(compiled(current, Path(current.__file__).read_text(), "after"),
+                         KERNEL, None),
+    }
+    if kernels["before"] is None:
+        raise AbError(f"{MODULE} at {rev} has no {KERNEL}; give a revision with the lazy "
+                      "marking map (issue 18)")
+    episodes = record(steps, quiet)
+    maps = [current.TiledMarkingMap(track, labels=False) for track, _ in episodes]
+    rows = max(m.shape[0] for m in maps)
+    cols = max(m.shape[1] for m in maps)
+    memory = np.ones((rows, cols), np.uint8)  # written: its pages are in before any pass
+    for m in maps:
+        m.intensity = memory[:m.shape[0], :m.shape[1]]
+    n_tiles = sum(len(tiles) for _, lists in episodes for tiles in lists)
+    n_calls = sum(len(lists) for _, lists in episodes)
+    first: list[str] = []  # the paint of each episode, as the first pass painted it
+
+    def paint(label: str) -> float:
+        kernel, elapsed = kernels[label], 0.0
+        for e, (m, (_, lists)) in enumerate(zip(maps, episodes, strict=True)):
+            m.intensity[:] = 0
+            m.filled[:] = 0
+            m.nonzero_rows[:] = 0
+            m._n_record[0] = 0
+            args = m.paint_args
+            for tiles in lists:
+                t0 = time.perf_counter()
+                try:
+                    kernel(tiles, *args)
+                except TypeError as e:  # numba: no matching signature
+                    raise AbError(f"{KERNEL} at {rev} takes other arguments than this "
+                                  f"checkout's ({e}); give a revision with the same "
+                                  "signature") from e
+                elapsed += time.perf_counter() - t0
+            digest = m.intensity.tobytes()
+            if len(first) <= e:
+                first.append(digest)
+            elif digest != first[e]:
+                raise PaintDiffers(f"the two versions paint episode {e}'s tiles differently "
+                                   f"(track seed {episodes[e][0].seed})")
+        return elapsed
+
+    paint("before")  # compiles (uncached) and checks, untimed
+    paint("after")
+    per: dict[str, list[float]] = {"before": [], "after": []}
+    with tqdm(total=rounds, desc="rounds", disable=quiet, file=sys.stderr) as bar:
+        for r in range(rounds):
+            order = ("before", "after") if r % 2 == 0 else ("after", "before")
+            for label in order:
+                per[label].append(paint(label))
+            bar.update(1)
+    ratios = [a / b for a, b in zip(per["after"], per["before"], strict=True)]
+    before, after = statistics.median(per["before"]), statistics.median(per["after"])
+    return {
+        "machine": {"cores": os.cpu_count(), **cpu(), "pinned_to_one_core": True},
+        "rev": rev, "steps": steps, "rounds": rounds, "episodes": len(episodes),
+        "calls": n_calls, "tiles": n_tiles, "identical": True,
+        "before_ms": before * 1e3, "after_ms": after * 1e3,
+        "before_us_per_tile": before / max(1, n_tiles) * 1e6,
+        "after_us_per_tile": after / max(1, n_tiles) * 1e6,
+        "before_us_per_call": before / max(1, n_calls) * 1e6,
+        "after_us_per_call": after / max(1, n_calls) * 1e6,
+        "ratio_after_to_before": statistics.median(ratios),
+        "ratio_quartiles": [float(q) for q in np.percentile(ratios, [25, 75])],
+    }
+
+
+class PaintDiffers(Exception):
+    """The two versions' paint differs."""
+
+
+def table(r: dict[str, Any]) -> str:
+    m = r["machine"]
+    q1, q3 = r["ratio_quartiles"]
+    return "\n".join([
+        f"machine: {m['cores']} cores of {m['cpu']} ({m['simd']}; pinned to one)",
+        f"{MODULE}.{KERNEL}: before = {r['rev']}, after = this checkout; the tiles a lanes "
+        f"env painted in {r['steps']} random steps on generated tracks ({r['episodes']} "
+        f"episodes, {r['calls']} calls, {r['tiles']} tiles), {r['rounds']} rounds; paint "
+        "identical",
+        f"{'':<12}{'ms a pass':>12}{'µs/tile':>10}{'µs/call':>10}",
+        f"{'before':<12}{r['before_ms']:12.1f}{r['before_us_per_tile']:10.2f}"
+        f"{r['before_us_per_call']:10.1f}",
+        f"{'after':<12}{r['after_ms']:12.1f}{r['after_us_per_tile']:10.2f}"
+        f"{r['after_us_per_call']:10.1f}",
+        f"after / before (median of rounds) {r['ratio_after_to_before']:.3f}"
+        f"   (quartiles {q1:.3f}–{q3:.3f})",
+    ])
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--rev", required=True, help="the git revision of the 'before' code")
+    parser.add_argument("--steps", type=int, default=3000, help="env steps whose tiles are "
+                        "painted")
+    parser.add_argument("--rounds", type=int, default=9, help="rounds of one pass each")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    args = parser.parse_args(argv)
+    if args.steps < 1 or args.rounds < 1:
+        parser.error("--steps and --rounds must be ≥ 1")
+    pin_to_one_core()
+    try:
+        result = run(args.rev, args.steps, args.rounds, quiet=args.json)
+    except AbError as e:
+        print(f"bench_paint.py: error: {e}", file=sys.stderr)
+        return 2
+    except PaintDiffers as e:
+        print(f"bench_paint.py: error: {e}; the paint must stay bit-identical",
+              file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("bench_paint.py: interrupted; nothing measured to report", file=sys.stderr)
+        return 130
+    print(json.dumps(result, indent=2) if args.json else table(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
