@@ -204,6 +204,18 @@ def _paint_pixel(
 
 
 @njit(cache=True)
+def _turn_mod(x: float) -> float:
+    """``x % (2π)`` for ``x`` in [−2π, 2π] (a difference of two atan2), Python's float
+    modulo without its fmod: for such x that is x, x + 2π or x − 2π, exactly."""
+    two_pi = 2.0 * math.pi
+    if x < 0.0:
+        return x + two_pi
+    if x >= two_pi:
+        return x - two_pi
+    return x
+
+
+@njit(cache=True)
 def _in_zones(s: float, zones: np.ndarray, n_zones: int, total: float, closed: bool) -> bool:
     """Whether arc length ``s`` [m] lies in one of ``zones[:n_zones]`` (``[lo, hi]`` [m])
     or, on a closed track, one shifted by ± ``total`` (as ``_cyclic_band`` looks)."""
@@ -619,8 +631,7 @@ def _raster_kernel(
                                 elif not (side and wedge
                                           and sign * (ax_ * vy - ay_ * vx) > INSIDE_MARGIN * hv
                                           and sign * (vx * by_ - vy * bx_) > INSIDE_MARGIN * hv):
-                                    u = ((sign * (math.atan2(vy, vx) - phi0))
-                                         % (2.0 * math.pi)) * radius
+                                    u = _turn_mod(sign * (math.atan2(vy, vx) - phi0)) * radius
                                     if (c == 0 and u > u_max and u >= turn - ZERO_MARGIN_M
                                             and length[j] < turn - ZERO_MARGIN_M):
                                         u -= turn  # just before the start (not a full turn,
