@@ -8,10 +8,11 @@ to see it).
 The work: a "lanes" env on default generated tracks (a new track per reset), uniformly
 random actions from a fixed seed, ``--steps`` steps; after every reset and step the
 level-0 tiles its scene's marking map painted are listed (the reset's first view
-included). Both versions then paint exactly those lists, call by call, into maps of the
-same memory (zeroed between passes, untimed; the memory is written once before, so no
-pass pays its page faults), the version that goes first alternating by round; only the
-kernel calls are timed. Every pass's paint is compared with the other version's: a
+included). Both versions then paint exactly those lists, one call a list (one a frame, as
+in the env), each through its own module's ``TiledMarkingMap`` on the same memory (zeroed
+between passes, untimed; the memory is written once before, so no pass pays its page
+faults), the version that goes first alternating by round; only the paint calls are
+timed. Every pass's paint is compared with the other version's: a
 difference is an error (exit 1), since the paint must stay bit-identical.
 
 Both versions are compiled here from source (``cache=False``, as ``bench_kernel_ab.py``
@@ -23,6 +24,7 @@ ratio after / before, with the core count; a table, or ``--json``.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import statistics
@@ -39,6 +41,10 @@ MODULE = "tfalda_sim.tracks.raster"
 
 KERNEL = "_paint_listed"
 """The kernel a lazy scene's fill calls for its level-0 tiles."""
+
+MAX_STEPS = 100_000
+"""Most env steps recorded: their episodes' tracks and tile lists stay in memory (≈ 1800
+tracks and 10 MB of lists at most)."""
 
 
 def record(steps: int, quiet: bool) -> list[tuple[Any, list[Any]]]:
@@ -84,48 +90,42 @@ def run(rev: str, steps: int, rounds: int, quiet: bool) -> dict[str, Any]:
     from tqdm import tqdm
 
     current, old_source = module_source(MODULE, rev)
-    kernels = {
-        "before": getattr(compiled(current, old_source, "before"), KERNEL, None),
-        "after": getattr(compiled(current, Path(current.__file__).read_text(), "after"),
-                         KERNEL, None),
-    }
-    if kernels["before"] is None:
+    modules = {"before": compiled(current, old_source, "before"),
+               "after": compiled(current, Path(current.__file__).read_text(), "after")}
+    if not callable(getattr(modules["before"], KERNEL, None)):
         raise AbError(f"{MODULE} at {rev} has no {KERNEL}; give a revision with the lazy "
                       "marking map (issue 18)")
     episodes = record(steps, quiet)
-    maps = [current.TiledMarkingMap(track, labels=False) for track, _ in episodes]
-    rows = max(m.shape[0] for m in maps)
-    cols = max(m.shape[1] for m in maps)
-    memory = np.ones((rows, cols), np.uint8)  # written: its pages are in before any pass
-    for m in maps:
-        m.intensity = memory[:m.shape[0], :m.shape[1]]
+    # Each version paints through its own module's map (its own arguments: chunk boxes,
+    # row masks), made afresh for each episode and pass (untimed) on one memory.
+    shapes = [current.map_geometry(track)[1] for track, _ in episodes]
+    memory = np.ones((max(r for r, _ in shapes), max(c for _, c in shapes)), np.uint8)
     n_tiles = sum(len(tiles) for _, lists in episodes for tiles in lists)
     n_calls = sum(len(lists) for _, lists in episodes)
-    first: list[str] = []  # the paint of each episode, as the first pass painted it
+    first: list[bytes] = []  # a digest of each episode's paint, as the first pass made it
 
     def paint(label: str) -> float:
-        kernel, elapsed = kernels[label], 0.0
-        for e, (m, (_, lists)) in enumerate(zip(maps, episodes, strict=True)):
-            m.intensity[:] = 0
-            m.filled[:] = 0
-            m.nonzero_rows[:] = 0
-            m._n_record[0] = 0
-            args = m.paint_args
-            for tiles in lists:
-                t0 = time.perf_counter()
-                try:
-                    kernel(tiles, *args)
-                except TypeError as e:  # numba: no matching signature
-                    raise AbError(f"{KERNEL} at {rev} takes other arguments than this "
-                                  f"checkout's ({e}); give a revision with the same "
-                                  "signature") from e
-                elapsed += time.perf_counter() - t0
-            digest = m.intensity.tobytes()
-            if len(first) <= e:
+        elapsed = 0.0
+        for k, ((track, lists), (rows, cols)) in enumerate(zip(episodes, shapes, strict=True)):
+            view = memory[:rows, :cols]
+            view[:] = 0
+            try:
+                m = modules[label].TiledMarkingMap(track, labels=False, intensity=view)
+                m.paint_args  # noqa: B018  (made before the clock starts)
+                for tiles in lists:
+                    t0 = time.perf_counter()
+                    m.paint_level0(tiles)
+                    elapsed += time.perf_counter() - t0
+            except Exception as error:  # a revision whose map or kernel differs
+                raise AbError(f"{MODULE} at {rev} cannot paint this checkout's tile lists "
+                              f"({type(error).__name__}: {error}); give a revision with the "
+                              "same TiledMarkingMap and paint_level0") from error
+            digest = hashlib.blake2b(np.ascontiguousarray(view)).digest()
+            if len(first) <= k:
                 first.append(digest)
-            elif digest != first[e]:
-                raise PaintDiffers(f"the two versions paint episode {e}'s tiles differently "
-                                   f"(track seed {episodes[e][0].seed})")
+            elif digest != first[k]:
+                raise PaintDiffers(f"the two versions paint episode {k}'s tiles differently "
+                                   f"(track seed {track.seed})")
         return elapsed
 
     paint("before")  # compiles (uncached) and checks, untimed
@@ -186,6 +186,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.steps < 1 or args.rounds < 1:
         parser.error("--steps and --rounds must be ≥ 1")
+    if args.steps > MAX_STEPS:
+        parser.error(f"--steps must be ≤ {MAX_STEPS} (the episodes' tracks and tile lists "
+                     "are kept in memory); give fewer steps")
     pin_to_one_core()
     try:
         result = run(args.rev, args.steps, args.rounds, quiet=args.json)

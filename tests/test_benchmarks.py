@@ -443,6 +443,7 @@ def test_bench_paint_repaints_an_envs_tiles_with_both_revisions() -> None:
 @pytest.mark.parametrize(("args", "message"), [
     (("--rev", "no-such-revision"), "give a commit"),
     (("--rev", "HEAD", "--steps", "0"), "must be ≥ 1"),
+    (("--rev", "HEAD", "--steps", "100001"), "must be ≤ 100000"),
 ])
 def test_bench_paint_names_bad_arguments(args: tuple[str, ...], message: str) -> None:
     done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_paint.py"), *args,

@@ -206,7 +206,8 @@ def _paint_pixel(
 @njit(cache=True)
 def _turn_mod(x: float) -> float:
     """``x % (2π)`` for ``x`` in [−2π, 2π] (a difference of two atan2), Python's float
-    modulo without its fmod: for such x that is x, x + 2π or x − 2π, exactly."""
+    modulo without its fmod: for such x that is x, x + 2π or x − 2π, exactly (only a −0.0
+    stays −0.0, where Python gives +0.0: equal in every comparison and sum here)."""
     two_pi = 2.0 * math.pi
     if x < 0.0:
         return x + two_pi

@@ -470,3 +470,18 @@ def test_untouched_zeros_takes_memory_it_is_given_or_new_memory_of_the_reserve()
     bigger = memory_of(untouched_zeros((65, 64), memory, reserve_bytes=1000))
     assert bigger is not memory and len(bigger) == 65 * 64  # the size, above the reserve
     assert len(memory_of(untouched_zeros((3, 3)))) == 9  # no reserve: the size
+
+
+def test_turn_mod_is_pythons_modulo_for_differences_of_two_angles() -> None:
+    """``_turn_mod`` (no fmod) equals Python's ``x % 2π`` for every difference of two
+    atan2 results, the ends ±2π and values next to 0 and 2π included."""
+    from tfalda_sim.tracks.raster import _turn_mod
+
+    rng = np.random.default_rng(3)
+    a = rng.uniform(-math.pi, math.pi, 20000)
+    b = rng.uniform(-math.pi, math.pi, 20000)
+    two_pi = 2.0 * math.pi
+    edges = [two_pi, -two_pi, 0.0, 1e-300, -1e-300, np.nextafter(two_pi, 0.0),
+             np.nextafter(-two_pi, 0.0), math.pi, -math.pi]
+    for x in [*(a - b), *(b - a), *edges]:
+        assert _turn_mod(float(x)) == float(x) % two_pi, x
