@@ -35,6 +35,7 @@ import subprocess
 import sys
 import time
 import types
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -194,16 +195,31 @@ def main(argv: list[str] | None = None) -> int:
     if not names:
         parser.error("--kernels names no function")
     pin_to_one_core()
+    return report("bench_kernel_ab.py", lambda: run(
+        args.rev, args.module, names, args.track, args.observation, args.rounds,
+        args.turn_steps, quiet=args.json), table, args.json)
+
+
+def report(script: str, work: Callable[[], dict[str, Any]],
+           table: Callable[[dict[str, Any]], str], as_json: bool,
+           failure: type[Exception] | None = None) -> int:
+    """Run ``work`` and print its result (``table``'s, or JSON); the exit code: 0, 2 for
+    an argument's problem (``AbError``), 1 for a ``failure`` (its message says why), 130
+    for a Ctrl-C (nothing to report)."""
     try:
-        result = run(args.rev, args.module, names, args.track, args.observation, args.rounds,
-                     args.turn_steps, quiet=args.json)
+        result = work()
     except AbError as e:
-        print(f"bench_kernel_ab.py: error: {e}", file=sys.stderr)
+        print(f"{script}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("bench_kernel_ab.py: interrupted; nothing measured to report", file=sys.stderr)
+        print(f"{script}: interrupted; nothing measured to report", file=sys.stderr)
         return 130
-    print(json.dumps(result, indent=2) if args.json else table(result))
+    except Exception as e:
+        if failure is None or not isinstance(e, failure):
+            raise
+        print(f"{script}: error: {e}", file=sys.stderr)
+        return 1
+    print(json.dumps(result, indent=2) if as_json else table(result))
     return 0
 
 

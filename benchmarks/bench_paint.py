@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import json
 import os
 import statistics
 import sys
@@ -34,7 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from _machine import cpu, pin_to_one_core
-from bench_kernel_ab import AbError, compiled, module_source
+from bench_kernel_ab import AbError, compiled, module_source, report
 
 MODULE = "tfalda_sim.tracks.raster"
 """The module whose kernel is compared."""
@@ -125,7 +124,8 @@ def run(rev: str, steps: int, rounds: int, quiet: bool) -> dict[str, Any]:
                 first.append(digest)
             elif digest != first[k]:
                 raise PaintDiffers(f"the two versions paint episode {k}'s tiles differently "
-                                   f"(track seed {track.seed})")
+                                   f"(track seed {track.seed}); the paint must stay "
+                                   "bit-identical")
         return elapsed
 
     paint("before")  # compiles (uncached) and checks, untimed
@@ -190,20 +190,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--steps must be ≤ {MAX_STEPS} (the episodes' tracks and tile lists "
                      "are kept in memory); give fewer steps")
     pin_to_one_core()
-    try:
-        result = run(args.rev, args.steps, args.rounds, quiet=args.json)
-    except AbError as e:
-        print(f"bench_paint.py: error: {e}", file=sys.stderr)
-        return 2
-    except PaintDiffers as e:
-        print(f"bench_paint.py: error: {e}; the paint must stay bit-identical",
-              file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("bench_paint.py: interrupted; nothing measured to report", file=sys.stderr)
-        return 130
-    print(json.dumps(result, indent=2) if args.json else table(result))
-    return 0
+    return report("bench_paint.py", lambda: run(args.rev, args.steps, args.rounds,
+                                                quiet=args.json),
+                  table, args.json, failure=PaintDiffers)
 
 
 if __name__ == "__main__":

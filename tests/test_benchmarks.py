@@ -420,9 +420,13 @@ def test_bench_kernel_ab_swaps_a_revisions_kernels_into_env_steps() -> None:
       "--track", "no-such-track"), "unknown track"),
 ])
 def test_bench_kernel_ab_names_bad_arguments(args: tuple[str, ...], message: str) -> None:
-    done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_kernel_ab.py"), *args,
-                           "--rounds", "1"], capture_output=True, text=True, timeout=300,
-                          check=False)
+    refused("bench_kernel_ab.py", args, message)
+
+
+def refused(script: str, args: tuple[str, ...], message: str) -> None:
+    """``script`` with ``args`` (and one round) exits 2 naming the problem, no traceback."""
+    done = subprocess.run([sys.executable, str(BENCHMARKS / script), *args, "--rounds", "1"],
+                          capture_output=True, text=True, timeout=300, check=False)
     assert done.returncode == 2
     assert message in done.stderr and "Traceback" not in done.stderr
 
@@ -446,8 +450,4 @@ def test_bench_paint_repaints_an_envs_tiles_with_both_revisions() -> None:
     (("--rev", "HEAD", "--steps", "100001"), "must be ≤ 100000"),
 ])
 def test_bench_paint_names_bad_arguments(args: tuple[str, ...], message: str) -> None:
-    done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_paint.py"), *args,
-                           "--rounds", "1"], capture_output=True, text=True, timeout=300,
-                          check=False)
-    assert done.returncode == 2
-    assert message in done.stderr and "Traceback" not in done.stderr
+    refused("bench_paint.py", args, message)
