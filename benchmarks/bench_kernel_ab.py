@@ -173,9 +173,17 @@ def table(result: dict[str, Any]) -> str:
     ])
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def ab_parser(doc: str) -> argparse.ArgumentParser:
+    """An A/B script's parser (its docstring's first paragraph), with ``--rev`` and
+    ``--json``."""
+    parser = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     parser.add_argument("--rev", required=True, help="the git revision of the 'before' code")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = ab_parser(__doc__)
     parser.add_argument("--module", required=True,
                         help="the module whose kernels are swapped, e.g. "
                              "tfalda_sim.rendering.renderer")
@@ -187,7 +195,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--observation", default="lanes", choices=("lanes", "image"))
     parser.add_argument("--rounds", type=int, default=60, help="rounds of two turns")
     parser.add_argument("--turn-steps", type=int, default=TURN_STEPS, help="steps per turn")
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)
     if args.rounds < 1 or args.turn_steps < 1:
         parser.error("--rounds and --turn-steps must be ≥ 1")

@@ -23,7 +23,6 @@ ratio after / before, with the core count; a table, or ``--json``.
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import os
 import statistics
@@ -33,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from _machine import cpu, pin_to_one_core
-from bench_kernel_ab import AbError, compiled, module_source, report
+from bench_kernel_ab import AbError, ab_parser, compiled, module_source, report
 
 MODULE = "tfalda_sim.tracks.raster"
 """The module whose kernel is compared."""
@@ -177,12 +176,10 @@ def table(r: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--rev", required=True, help="the git revision of the 'before' code")
+    parser = ab_parser(__doc__)
     parser.add_argument("--steps", type=int, default=3000, help="env steps whose tiles are "
                         "painted")
     parser.add_argument("--rounds", type=int, default=9, help="rounds of one pass each")
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
     args = parser.parse_args(argv)
     if args.steps < 1 or args.rounds < 1:
         parser.error("--steps and --rounds must be ≥ 1")
