@@ -22,7 +22,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from tfalda_sim.interrupts import INTERRUPTS, ignoring_stops, is_interrupt
+from tfalda_sim.interrupts import INTERRUPTS, deferring_stops, ignoring_stops, is_interrupt
 
 TRAIN_SEEDS: tuple[int, int] = (0, 1000)
 """Generated track seeds ``[low, high)`` the policy is trained on."""
@@ -114,6 +114,20 @@ def _progress_callback(total: int) -> Any:
     return TqdmCallback()
 
 
+def _whole_checkpoints() -> type:
+    """SB3's ``CheckpointCallback`` whose saves a Ctrl-C cannot cut: the stop is held
+    until the checkpoint is written, then ends the training as anywhere else (a Ctrl-C
+    inside torch's zip writer turned into a RuntimeError, an internal error)."""
+    from stable_baselines3.common.callbacks import CheckpointCallback
+
+    class WholeCheckpoints(CheckpointCallback):
+        def _on_step(self) -> bool:
+            with deferring_stops():
+                return super()._on_step()
+
+    return WholeCheckpoints
+
+
 def _publish_run(staging: Path, out: Path) -> None:
     """Move a finished (or interrupted) run from its staging folder into ``out``: files
     replace files of the same name (policy.zip, train.json, checkpoints), and the
@@ -155,13 +169,16 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
 
     The run is written to a staging folder beside ``out`` and moved into ``out`` when it
     ends: an error leaves ``out`` as it was. A Ctrl-C ends the training early and keeps
-    the policy so far (``summary["interrupted"]``, ``summary["timesteps_done"]``)."""
+    the policy so far (``summary["interrupted"]``, ``summary["timesteps_done"]``); one
+    while a checkpoint is written waits for it, one while the policy is saved is ignored."""
     import cv2
     import torch
     from stable_baselines3 import PPO
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback
+    from stable_baselines3.common.callbacks import CallbackList
 
     from .vec_env import make_sb3_vec_env
+
+    checkpoints = _whole_checkpoints()
 
     cfg = config or PpoConfig()
     out = Path(out)
@@ -196,8 +213,8 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
                                        "log_std_init": cfg.log_std_init},
                         seed=seed, device="cpu", verbose=0,
                         tensorboard_log=str(staging / "tb"))
-            callbacks = [CheckpointCallback(max(1, checkpoint_steps // n_envs),
-                                            str(staging / "checkpoints"), name_prefix="ppo")]
+            callbacks = [checkpoints(max(1, checkpoint_steps // n_envs),
+                                     str(staging / "checkpoints"), name_prefix="ppo")]
             bar = None
             if progress:  # PPO learns in whole rollouts of n_steps per env
                 rollout = cfg.n_steps * n_envs
@@ -211,8 +228,10 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
                 if not is_interrupt(exc):
                     raise
                 interrupted = True  # keep the policy so far
-                shield.enter_context(ignoring_stops())
             finally:
+                # From here the run is saved whole: a Ctrl-C while torch writes the
+                # policy broke its zip writer ("unexpected pos"), an internal error.
+                shield.enter_context(ignoring_stops())
                 if bar is not None:
                     bar.close()
             elapsed = time.perf_counter() - t0

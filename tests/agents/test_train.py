@@ -175,3 +175,56 @@ def test_a_ctrl_c_while_the_policy_is_saved_leaks_no_file_and_writes_no_run(
     leaks = [u for u in unraisable if isinstance(u.exc_value, ResourceWarning)]
     assert not leaks, [str(u.exc_value) for u in leaks]
     assert not (tmp_path / "run").exists() and not list(tmp_path.glob(".tfalda-sim-*"))
+
+
+def test_a_ctrl_c_while_the_finished_policy_is_saved_is_ignored(tmp_path, monkeypatch) -> None:
+    """A real Ctrl-C (SIGINT) after the training while torch writes the policy: its zip
+    writer once broke on it ("unexpected pos", an internal error of the CLI). The run is
+    saved whole and published; the Ctrl-C is ignored there."""
+    import os
+    import signal
+
+    save = PPO.save
+
+    def save_with_a_ctrl_c(self, *args, **kwargs):
+        os.kill(os.getpid(), signal.SIGINT)
+        return save(self, *args, **kwargs)
+
+    monkeypatch.setattr(PPO, "save", save_with_a_ctrl_c)
+    config = PpoConfig(n_steps=64, batch_size=32, n_epochs=1)
+    summary = train(64, 1, 0, tmp_path / "run", config=config, progress=False,
+                    subprocess=False, track="oval")
+    assert not summary["interrupted"]
+    PPO.load(tmp_path / "run" / "policy.zip")  # whole
+    assert json.loads((tmp_path / "run" / "train.json").read_text())["timesteps_done"] >= 64
+
+
+def test_a_ctrl_c_during_a_checkpoint_waits_for_it_then_ends_the_training(
+        tmp_path, monkeypatch) -> None:
+    """A real Ctrl-C while SB3 writes a checkpoint is held until the checkpoint is
+    written, then stops the training as anywhere else: the run keeps the policy so far
+    and the whole checkpoint."""
+    import os
+    import signal
+
+    from stable_baselines3.common.callbacks import CheckpointCallback
+
+    on_step = CheckpointCallback._on_step
+    sent: list[int] = []
+
+    def on_step_with_a_ctrl_c(self) -> bool:
+        if self.n_calls % self.save_freq == 0 and not sent:
+            sent.append(self.n_calls)
+            os.kill(os.getpid(), signal.SIGINT)
+        return on_step(self)
+
+    monkeypatch.setattr(CheckpointCallback, "_on_step", on_step_with_a_ctrl_c)
+    config = PpoConfig(n_steps=64, batch_size=32, n_epochs=1)
+    summary = train(256, 1, 0, tmp_path / "run", config=config, progress=False,
+                    subprocess=False, track="oval", checkpoint_steps=32)
+    assert sent == [32]
+    assert summary["interrupted"] and summary["timesteps_done"] < 256
+    checkpoints = sorted((tmp_path / "run" / "checkpoints").glob("ppo_*.zip"))
+    assert [c.name for c in checkpoints] == ["ppo_32_steps.zip"]
+    PPO.load(checkpoints[0])  # whole
+    PPO.load(tmp_path / "run" / "policy.zip")
