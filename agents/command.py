@@ -27,7 +27,7 @@ from tfalda_sim.cli_common import (
     sweep_backend,
     sweep_exit,
 )
-from tfalda_sim.interrupts import ignoring_stops
+from tfalda_sim.interrupts import holding_stops
 from tfalda_sim.perception.command import check_camera_geometry
 from tfalda_sim.perception.geometry import CameraGeometryError
 from tfalda_sim.tracks import NAMED_TRACKS, generate, load_named
@@ -361,7 +361,7 @@ def cmd_stress(args: argparse.Namespace) -> int:
         if not rows:
             outs.abort()
             return sweep_exit(end, "no run had finished; nothing written")
-        with ignoring_stops():  # a second Ctrl-C must not lose the first one's results
+        with holding_stops():  # a second Ctrl-C must not lose the first one's results
             with open(files["json"], "w", encoding="utf-8") as fh:
                 json.dump(report_document(rows, tally.runs) | {"interrupted": end.early}, fh,
                           indent=1)
@@ -453,7 +453,7 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
         if not runs:
             outs.abort()
             return sweep_exit(end, "no run had finished; nothing written")
-        with ignoring_stops():  # a second Ctrl-C must not lose the first one's results
+        with holding_stops():  # a second Ctrl-C must not lose the first one's results
             result = result_document(args.agent, policy, args.camera, args.laps, args.seeds,
                                      args.speeds, runs, end.interrupted, end.worker_died)
             if args.out:

@@ -22,7 +22,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from tfalda_sim.interrupts import INTERRUPTS, deferring_stops, ignoring_stops, is_interrupt
+from tfalda_sim.interrupts import INTERRUPTS, deferring_stops, holding_stops, is_interrupt
 
 TRAIN_SEEDS: tuple[int, int] = (0, 1000)
 """Generated track seeds ``[low, high)`` the policy is trained on."""
@@ -231,7 +231,7 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
             finally:
                 # From here the run is saved whole: a Ctrl-C while torch writes the
                 # policy broke its zip writer ("unexpected pos"), an internal error.
-                shield.enter_context(ignoring_stops())
+                shield.enter_context(holding_stops())
                 if bar is not None:
                     bar.close()
             elapsed = time.perf_counter() - t0

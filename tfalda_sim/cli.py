@@ -16,8 +16,8 @@ import signal
 import sys
 from collections.abc import Sequence
 
-from .cli_common import EXIT_BAD_INPUT, EXIT_NEGATIVE, CliError, interrupted
-from .interrupts import is_interrupt, stop_signals_interrupt
+from .cli_common import EXIT_BAD_INPUT, EXIT_NEGATIVE, EXIT_OK, CliError, interrupted
+from .interrupts import held_stop, is_interrupt, stop_signals_interrupt
 from .outputs import OutputError
 
 COMMAND_MODULES: tuple[str, ...] = ("tracks.command", "camera.command", "rendering.command",
@@ -53,6 +53,11 @@ def _run(argv: Sequence[str] | None) -> int:
             return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
         code = int(args.func(args))
         sys.stdout.flush()  # a closed pipe shows here, inside the handling below
+        if held_stop() is not None and code in (EXIT_OK, EXIT_NEGATIVE):
+            # A first Ctrl-C that came while the finished command saved its results
+            # (``holding_stops``): everything was kept, and the stop is not swallowed.
+            return interrupted("it came as the command saved its finished results; all "
+                               "of them were kept")
         return code
     except (CliError, OutputError) as exc:
         print(f"error: {exc}", file=sys.stderr)

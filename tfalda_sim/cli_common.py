@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Generic, TypeVar
 
-from .interrupts import INTERRUPTS, deferring_stops, ignoring_stops, is_interrupt, last_stop_signal
+from .interrupts import INTERRUPTS, deferring_stops, holding_stops, is_interrupt, last_stop_signal
 from .outputs import DIRECTORY, Output, OutputError, journal_of
 from .outputs import check_outputs as _check_outputs
 from .parallel import BACKENDS, Backend, RayUnavailable, WorkerDied, import_ray, resolve_workers
@@ -253,7 +253,7 @@ def consume(results: Iterator[R], handle: Callable[[R], None]) -> SweepEnd:
     except WorkerDied as exc:
         end.worker_died = str(exc)
     finally:
-        with ignoring_stops():
+        with holding_stops():
             close = getattr(results, "close", None)
             if close is not None:
                 close()

@@ -5,7 +5,9 @@ Inside ``stop_signals_interrupt()`` SIGTERM (``timeout``, a CI cancel, ``kill``)
 interrupt path — keep what was finished, say what, exit ``128 + signal`` — serves all
 three. ``ignoring_stops()`` shields the few seconds in which a command saves what it
 finished: a second Ctrl-C there would otherwise throw away the first one's results.
-``deferring_stops()`` holds a stop back while one finished result goes to its outputs.
+``deferring_stops()`` holds a stop back while one finished result goes to its outputs;
+``holding_stops()`` while a finished command saves its results (the command then says so
+and exits 130, ``held_stop()``).
 A stop whose handler ran inside a finalizer (where CPython drops exceptions) is raised
 again a moment later, so no Ctrl-C is lost.
 """
@@ -26,6 +28,9 @@ STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGINT, signal.SIGTERM, signa
 """The signals that stop a command cleanly."""
 
 _last_signal: int = signal.SIGINT
+
+_held: list[int] = []
+"""Stops that came inside ``holding_stops()`` since ``stop_signals_interrupt()`` began."""
 
 
 def _raise_interrupt(signum: int, frame: FrameType | None) -> None:
@@ -72,6 +77,7 @@ def stop_signals_interrupt() -> Iterator[None]:
     the handlers are restored after it."""
     global _last_signal
     _last_signal = signal.SIGINT
+    _held.clear()
 
     def choose(saved: dict[signal.Signals, _Handler]) -> dict[signal.Signals, _Handler]:
         chosen: dict[signal.Signals, _Handler] = {}
@@ -139,6 +145,33 @@ def ignoring_stops() -> Iterator[None]:
     the handlers; a no-op outside the main thread."""
     with _handling(lambda saved: dict.fromkeys(saved, signal.SIG_IGN)):
         yield
+
+
+@contextlib.contextmanager
+def holding_stops() -> Iterator[None]:
+    """Hold the stop signals back inside the block (saving what was finished) and do not
+    act on them after it, but note them (``held_stop``): a first Ctrl-C that lands while
+    a finished command saves its results then ends it with exit 130 and a line saying
+    all was kept (``tfalda_sim.cli``), instead of being swallowed; a second one, after a
+    first that cut the work, changes nothing. Unlike ``ignoring_stops`` the disposition
+    is a handler, which a child process started inside the block does not inherit. A
+    no-op outside the main thread."""
+
+    def hold(signum: int, frame: FrameType | None) -> None:
+        global _last_signal
+        if not _held:
+            _last_signal = signum
+        _held.append(signum)
+
+    with _handling(lambda saved: {sig: hold for sig, handler in saved.items()
+                                  if handler is not signal.SIG_IGN}):
+        yield
+
+
+def held_stop() -> int | None:
+    """The first stop signal ``holding_stops()`` held back since
+    ``stop_signals_interrupt()`` began, or None."""
+    return _held[0] if _held else None
 
 
 @contextlib.contextmanager

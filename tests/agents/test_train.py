@@ -177,12 +177,15 @@ def test_a_ctrl_c_while_the_policy_is_saved_leaks_no_file_and_writes_no_run(
     assert not (tmp_path / "run").exists() and not list(tmp_path.glob(".tfalda-sim-*"))
 
 
-def test_a_ctrl_c_while_the_finished_policy_is_saved_is_ignored(tmp_path, monkeypatch) -> None:
+def test_a_ctrl_c_while_the_finished_policy_is_saved_is_held(tmp_path, monkeypatch) -> None:
     """A real Ctrl-C (SIGINT) after the training while torch writes the policy: its zip
     writer once broke on it ("unexpected pos", an internal error of the CLI). The run is
-    saved whole and published; the Ctrl-C is ignored there."""
+    saved whole and published; the Ctrl-C is held there and noted (``tfalda-sim train``
+    then exits 130)."""
     import os
     import signal
+
+    from tfalda_sim.interrupts import held_stop, stop_signals_interrupt
 
     save = PPO.save
 
@@ -192,9 +195,11 @@ def test_a_ctrl_c_while_the_finished_policy_is_saved_is_ignored(tmp_path, monkey
 
     monkeypatch.setattr(PPO, "save", save_with_a_ctrl_c)
     config = PpoConfig(n_steps=64, batch_size=32, n_epochs=1)
-    summary = train(64, 1, 0, tmp_path / "run", config=config, progress=False,
-                    subprocess=False, track="oval")
-    assert not summary["interrupted"]
+    with stop_signals_interrupt():
+        summary = train(64, 1, 0, tmp_path / "run", config=config, progress=False,
+                        subprocess=False, track="oval")
+        assert held_stop() == signal.SIGINT
+    assert not summary["interrupted"]  # the training had finished
     PPO.load(tmp_path / "run" / "policy.zip")  # whole
     assert json.loads((tmp_path / "run" / "train.json").read_text())["timesteps_done"] >= 64
 

@@ -160,3 +160,49 @@ def test_a_ctrl_c_dropped_inside_a_finalizer_is_delivered_again() -> None:
     finally:
         sys.unraisablehook = previous
     assert len(seen) == 1
+
+
+def test_a_held_stop_is_noted_not_raised_and_a_command_then_exits_with_it(
+        monkeypatch, capsys) -> None:
+    """``holding_stops`` (a finished command saving its results) neither cuts the block
+    nor raises after it, but notes the first stop; ``tfalda-sim`` then ends the command
+    with that stop's exit code and a line saying all was kept (the CLI fuzz's Ctrl-C,
+    landing there, had been swallowed: exit 0)."""
+    import argparse
+
+    from tfalda_sim import cli
+    from tfalda_sim.interrupts import held_stop, holding_stops
+
+    with stop_signals_interrupt():
+        assert held_stop() is None
+        done = []
+        with holding_stops():
+            os.kill(os.getpid(), signal.SIGTERM)
+            _spin()
+            os.kill(os.getpid(), signal.SIGINT)  # a second one: the first counts
+            _spin()
+            done.append("rest of the block")
+        assert done == ["rest of the block"]
+        assert held_stop() == signal.SIGTERM and last_stop_signal() == signal.SIGTERM
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+    def finished_then_saved(args: argparse.Namespace) -> int:
+        with holding_stops():
+            os.kill(os.getpid(), signal.SIGINT)
+            _spin()
+        print("results")
+        return 0
+
+    def parser() -> argparse.ArgumentParser:
+        p = argparse.ArgumentParser()
+        p.set_defaults(func=finished_then_saved)
+        return p
+
+    monkeypatch.setattr(cli, "build_parser", parser)
+    assert cli.main([]) == 130
+    out, err = capsys.readouterr()
+    assert out == "results\n" and "interrupted (Ctrl-C)" in err and "kept" in err
+    p = argparse.ArgumentParser()
+    p.set_defaults(func=lambda args: 0)
+    monkeypatch.setattr(cli, "build_parser", lambda: p)
+    assert cli.main([]) == 0  # a new command starts with nothing held

@@ -35,7 +35,7 @@ from ..cli_common import (
     sweep_backend,
     sweep_exit,
 )
-from ..interrupts import ignoring_stops
+from ..interrupts import holding_stops
 from ..perception import DetectorConfig, LaneObservation
 from ..perception.command import check_camera_geometry
 from ..perception.params import IMAGE_WIDTH_PX
@@ -236,7 +236,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         if end.early and "frames_done" not in out and not out.get("per_seed"):
             outs.abort()
             return sweep_exit(end, "no frame had been evaluated; nothing written")
-        with ignoring_stops():
+        with holding_stops():
             outs.commit()
     if args.json:
         print(json.dumps(out))
@@ -352,7 +352,7 @@ def _evaluate_seeds(args: argparse.Namespace, configs: Mapping[str, DetectorConf
     out["per_seed"] = per_seed
     if not per_seed:
         return end
-    with ignoring_stops():  # a second Ctrl-C must not lose the first one's results
+    with holding_stops():  # a second Ctrl-C must not lose the first one's results
         out["pooled"] = {label: t.summary() for label, t in tallies.items()}
         _write_seed_outputs(args, configs, out, outs, per_seed, lines)
         if args.results is not None:
@@ -405,7 +405,7 @@ def _evaluate_one(args: argparse.Namespace, configs: Mapping[str, DetectorConfig
             if exc.results is None:
                 return end
             single = exc.results
-        stack.enter_context(ignoring_stops())  # closing the video, writing the rest
+        stack.enter_context(holding_stops())  # closing the video, writing the rest
         _write_one_outputs(args, configs, kind, out, outs, single, end)
     return end
 
@@ -594,7 +594,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
         if not tally.jobs:
             outs.abort()
             return sweep_exit(end, "no scenario had finished; nothing written")
-        with ignoring_stops():  # a second Ctrl-C must not lose the first one's results
+        with holding_stops():  # a second Ctrl-C must not lose the first one's results
             result = tally.result(thesis, seeds, args.max_frames)
             result.update(scenarios_done=tally.jobs, scenarios=jobs, interrupted=end.early)
             table = markdown_table(result)

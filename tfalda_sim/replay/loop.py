@@ -29,7 +29,7 @@ from tqdm import tqdm
 
 from ..camera import Camera, load_camera
 from ..histogram import TimeHistogram
-from ..interrupts import INTERRUPTS, ignoring_stops, is_interrupt
+from ..interrupts import INTERRUPTS, holding_stops, is_interrupt
 from ..perception import (
     DetectorConfig,
     HoughConfig,
@@ -157,7 +157,7 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
         stopped = "interrupted"
         keep = True
     finally:
-        with ignoring_stops():  # closing the video must not be cut by a second Ctrl-C
+        with holding_stops():  # closing the video must not be cut by a second Ctrl-C
             if bar is not None:
                 bar.close()
             if writer is not None:
