@@ -122,6 +122,8 @@ def _whole_checkpoints() -> type:
 
     class WholeCheckpoints(CheckpointCallback):
         def _on_step(self) -> bool:
+            if self.n_calls % self.save_freq:  # no checkpoint this step (most): no
+                return super()._on_step()  # signal handlers swapped in the rollout
             with deferring_stops():
                 return super()._on_step()
 
@@ -170,7 +172,8 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
     The run is written to a staging folder beside ``out`` and moved into ``out`` when it
     ends: an error leaves ``out`` as it was. A Ctrl-C ends the training early and keeps
     the policy so far (``summary["interrupted"]``, ``summary["timesteps_done"]``); one
-    while a checkpoint is written waits for it, one while the policy is saved is ignored."""
+    while a checkpoint is written waits for it, one while the policy is saved is held
+    (``holding_stops``: ``tfalda-sim train`` then exits 130)."""
     import cv2
     import torch
     from stable_baselines3 import PPO
@@ -230,7 +233,7 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
                 interrupted = True  # keep the policy so far
             finally:
                 # From here the run is saved whole: a Ctrl-C while torch writes the
-                # policy broke its zip writer ("unexpected pos"), an internal error.
+                # policy broke its zip writer ("unexpected pos"); it is held and noted.
                 shield.enter_context(holding_stops())
                 if bar is not None:
                     bar.close()
