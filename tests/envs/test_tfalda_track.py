@@ -369,6 +369,41 @@ def test_prepare_reset_prepares_the_next_episode_and_changes_nothing(
     assert not fixed.prepare_reset()  # a fixed track: nothing to generate
 
 
+@pytest.mark.parametrize("observation", ["lanes", "image"])
+def test_prepare_reset_goes_in_stages_and_paints_the_first_frame_ahead(
+        observation: str) -> None:
+    """``prepare_reset(stop)`` asks ``stop`` after each stage and ends there when it says
+    so; the next call goes on: track, scene, then the first frame's paint, after which the
+    reset's first frame paints nothing more. The episode equals an unprepared env's."""
+    plain = gym.make("TfaldaTrack-v0", observation=observation)
+    prepared = gym.make("TfaldaTrack-v0", observation=observation)
+    env = prepared.unwrapped
+    for e in (plain, prepared):
+        e.reset(seed=11)
+    asked = []
+
+    def stop() -> bool:
+        asked.append(True)
+        return True
+
+    assert env.prepare_reset(stop) and len(asked) == 1
+    assert env._prepared is not None and env._prepared_scene is None
+    assert env.prepare_reset(stop) and len(asked) == 2
+    scene = env._prepared_scene[1]
+    assert scene.tiles.n_filled == 0
+    assert env.prepare_reset(stop) and len(asked) == 2  # the last stage: nothing to ask
+    painted = scene.tiles.n_filled
+    assert painted > 0
+    assert not env.prepare_reset(stop)
+    want, got = plain.reset(), prepared.reset()
+    assert env._scene is scene and scene.tiles.n_filled == painted  # all painted ahead
+    assert np.array_equal(want[0], got[0]) and want[1] == got[1]
+    for _ in range(10):
+        a = np.array([0.3], np.float32)
+        pairs = zip(plain.step(a), prepared.step(a), strict=True)
+        assert all(np.array_equal(x, y) for x, y in pairs)
+
+
 @pytest.mark.parametrize("point", ["corners", "add"])
 def test_a_reset_interrupted_while_the_world_changes_track_leaves_the_env_right(
         monkeypatch, point: str) -> None:

@@ -736,16 +736,22 @@ class Renderer:
     def _scene_data(self, scene: Scene) -> tuple[_Layout, BoxFaces, tuple]:
         """Layout, obstacle faces and layout key of ``scene`` (the current scene is kept)."""
         if self._current is None or self._current[0] is not scene:
-            key = (scene.resolution_m, scene.level_origin.tobytes(), scene.hall,
-                   scene.wall_origin, scene.wall_size)
-            layout = self._layouts.get(key)
-            if layout is None:
-                layout = self._build_layout(scene)
-                if len(self._layouts) >= 4:
-                    self._layouts.pop(next(iter(self._layouts)))
-                self._layouts[key] = layout
+            layout, key = self._layout_of(scene)
             self._current = (scene, layout, BoxFaces.of(scene.boxes), key)
         return self._current[1], self._current[2], self._current[3]
+
+    def _layout_of(self, scene: Scene) -> tuple[_Layout, tuple]:
+        """The layout of ``scene`` and its key (cached: a few; ``scene`` does not become
+        the current one)."""
+        key = (scene.resolution_m, scene.level_origin.tobytes(), scene.hall,
+               scene.wall_origin, scene.wall_size)
+        layout = self._layouts.get(key)
+        if layout is None:
+            layout = self._build_layout(scene)
+            if len(self._layouts) >= 4:
+                self._layouts.pop(next(iter(self._layouts)))
+            self._layouts[key] = layout
+        return layout, key
 
     def _layout(self, scene: Scene) -> _Layout:
         return self._scene_data(scene)[0]
@@ -879,6 +885,25 @@ class Renderer:
             scene, pose, [(0, 0, self.camera.width, self.camera.height)],
             speed_m_s=speed_m_s, frame_seed=frame_seed)
         return frame
+
+    def prefill(self, scene: Scene, pose: tuple[float, float, float],
+                windows: list[tuple[int, int, int, int]]) -> None:
+        """Fill what ``render_windows(scene, pose, windows)`` will read of a lazy scene
+        (without motion blur: a blurred render fills the rest itself), and render nothing:
+        a caller with time to spare does a first frame's paint ahead (a vector env's lane
+        preparing its next episode while another resets). The renders stay the same: a
+        filled tile holds the eager scene's texels, whoever filled it. The scene's layout
+        is made and kept too, and the scene last rendered stays this renderer's current
+        one. A no-op on an eager scene or a lazy one filled whole."""
+        x, y, yaw = (float(v) for v in pose)
+        if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(yaw)):
+            raise ValueError(f"pose must be finite, got {pose}")
+        boxes = self._check_windows(windows)
+        if not boxes or scene.tiles is None or scene.tiles.complete:
+            return
+        layout, _ = self._layout_of(scene)
+        st = self._stack(boxes, layout.pixel)
+        scene.prepare(st.level_bounds, self._affine(scene, x, y, yaw)[None], st.wall_rows)
 
     def render_windows(self, scene: Scene, pose: tuple[float, float, float],
                        windows: list[tuple[int, int, int, int]], *, speed_m_s: float = 0.0,

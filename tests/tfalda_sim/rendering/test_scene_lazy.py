@@ -876,3 +876,40 @@ def test_a_ctrl_c_while_a_scene_retires_leaves_its_marking_map_right(
     for got, want in zip(renderer.render_windows(b, pose, ROIS, frame_seed=1),
                          renderer.render_windows(eager, pose, ROIS, frame_seed=1), strict=True):
         np.testing.assert_array_equal(got, want)
+
+
+@pytest.mark.parametrize("kind", ["default", "randomised"])
+def test_prefill_fills_what_the_render_fills_and_the_render_stays_the_same(
+        kind: str) -> None:
+    """``Renderer.prefill`` (a vector env's lane painting a next episode's first frame
+    ahead): it fills exactly the tiles (of every level) and wall rows a render of those
+    windows at that pose fills, renders nothing, leaves the renderer's current scene as
+    it was, and the render after it fills nothing more and equals the render of a scene
+    that was not prefilled; an eager scene is left alone."""
+    track = generated(7)
+    fx, scene_seed = _effects(kind, 7)
+    renderer = Renderer()
+    views = (ROIS, ROIS[2:], [(0, 0, 752, 480)])
+    for k, (pose, windows) in enumerate(zip(_poses(track, 3, 5), views, strict=True)):
+        plain = build_scene(track, fx, np.random.default_rng(scene_seed))
+        ahead = build_scene(track, fx, np.random.default_rng(scene_seed))
+        want = renderer.render_windows(plain, pose, windows, frame_seed=k)
+        current = renderer._current
+        renderer.prefill(ahead, pose, windows)
+        assert renderer._current is current  # the scene last rendered stays current
+        assert ahead.tiles.n_filled > 0
+        np.testing.assert_array_equal(ahead.tiles.filled, plain.tiles.filled)
+        np.testing.assert_array_equal(ahead.tiles.wall_filled, plain.tiles.wall_filled)
+        filled = ahead.tiles.n_filled
+        got = renderer.render_windows(ahead, pose, windows, frame_seed=k)
+        assert ahead.tiles.n_filled == filled  # nothing was left to paint
+        for w, g in zip(want, got, strict=True):
+            np.testing.assert_array_equal(g, w)
+    eager = build_scene(track, fx, np.random.default_rng(scene_seed), lazy=False)
+    atlas = eager.atlas.copy()
+    renderer.prefill(eager, _poses(track, 1, 0)[0], ROIS)
+    np.testing.assert_array_equal(eager.atlas, atlas)
+    with pytest.raises(ValueError, match="finite"):
+        renderer.prefill(build_scene(track, fx), (0.0, float("nan"), 0.0), ROIS)
+    with pytest.raises(ValueError, match="inside"):
+        renderer.prefill(build_scene(track, fx), (0.0, 0.0, 0.0), [(700, 0, 100, 10)])
