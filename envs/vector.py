@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import functools
 import multiprocessing
 import os
 import platform
@@ -160,6 +161,7 @@ class TfaldaTrackVectorEnv(VectorEnv):
                                                       self._shm, self.num_envs)
         if FAST_STEPS and isinstance(self.single_action_space, gym.spaces.Box):
             self._board = _Board(ctx, self.num_envs, self.single_action_space.shape, lanes)
+            self._idle = _Idle(self._board, 0, self._local)
         for w in range(1, lanes):
             parent, child = ctx.Pipe()
             proc = ctx.Process(target=_worker, name=f"tfalda-vec-{w}", daemon=True, args=(
@@ -271,27 +273,27 @@ class TfaldaTrackVectorEnv(VectorEnv):
         try:
             answers = _step_envs(self._local, self.single_observation_space,
                                  self._observations, 0, acts[:n0], self._autoreset[:n0],
-                                 same_step)
+                                 same_step, self._idle.mark)
+            board.ctrl[board.parent_done] = self._seq
             ahead = _MergeAhead.of(answers[0][3], self.num_envs) if merge else None
             if ahead is not None and not all(ahead.fill(i, a[3]) for i, a in enumerate(answers)):
                 ahead = None
-            if _others_reset(self._autoreset, 0, n0):
-                _prepare_resets(self._local)
         except BaseException:
             with contextlib.suppress(Exception):
                 self._collect()  # the workers' answers, dropped: the board stays in step
             raise
-        for part in self._collect():
+        for part in self._collect(self._idle):
             answers.extend(part)
         if ahead is not None and not all(ahead.fill(i, answers[i][3])
                                          for i in range(n0, self.num_envs)):
             ahead = None
         return answers, None if ahead is None else ahead.merged
 
-    def _collect(self) -> list[list[tuple[float, bool, bool, dict[str, Any]]]]:
+    def _collect(self, idle: _Idle | None = None
+                 ) -> list[list[tuple[float, bool, bool, dict[str, Any]]]]:
         """The results of the step last posted of every worker not heard yet (all of
         them, but after a Ctrl-C), in worker order; a worker's error raised after all
-        have answered."""
+        have answered. ``idle``: what this process does while it waits (``_Idle``)."""
         board = self._board
         assert board is not None
         parts, error = [], None
@@ -299,7 +301,7 @@ class TfaldaTrackVectorEnv(VectorEnv):
             conn = self._conns[w - 1]
             start, stop = int(self._slices[w]), int(self._slices[w + 1])
             try:
-                message = _await_answer(conn, board, w, self._seq)
+                message = _await_answer(conn, board, w, self._seq, idle)
                 # Pipe messages to other commands or steps than this one are answers this
                 # process gave up on (a Ctrl-C while it waited): dropped, but the layouts
                 # a worker sent are learnt (it learnt them as it sent them).
@@ -536,11 +538,13 @@ def _copy(batch: Any) -> Any:
 
 
 def _step_envs(envs: list[gym.Env], space: gym.Space, buffer: Any, start: int,
-               actions: np.ndarray, autoreset: np.ndarray, same_step: bool
+               actions: np.ndarray, autoreset: np.ndarray, same_step: bool,
+               on_reset: Callable[[], None] | None = None
                ) -> list[tuple[float, bool, bool, dict[str, Any]]]:
-    """``envs`` (envs ``start``… of the batch) stepped, their observations in ``buffer``."""
-    return [_step_one(env, space, buffer, start + i, actions[i], bool(autoreset[i]), same_step)
-            for i, env in enumerate(envs)]
+    """``envs`` (envs ``start``… of the batch) stepped, their observations in ``buffer``;
+    ``on_reset()`` before any of them resets."""
+    return [_step_one(env, space, buffer, start + i, actions[i], bool(autoreset[i]), same_step,
+                      on_reset) for i, env in enumerate(envs)]
 
 
 def _reset_envs(envs: list[gym.Env], space: gym.Space, buffer: Any, start: int,
@@ -556,19 +560,24 @@ def _reset_envs(envs: list[gym.Env], space: gym.Space, buffer: Any, start: int,
 
 
 def _step_one(env: gym.Env, space: gym.Space, buffer: Any, index: int, action: np.ndarray,
-              autoreset: bool, same_step: bool = False
+              autoreset: bool, same_step: bool = False,
+              on_reset: Callable[[], None] | None = None
               ) -> tuple[float, bool, bool, dict[str, Any]]:
     """One env's step, its observation written to ``buffer``. NEXT_STEP autoreset: a
     step with ``autoreset`` resets instead; SAME_STEP (``same_step``): an episode's last
     step resets at once, the info being ``SyncVectorEnv``'s (``final_obs``,
-    ``final_info``, then the reset's info)."""
+    ``final_info``, then the reset's info). ``on_reset()`` just before a reset."""
     if autoreset:
+        if on_reset is not None:
+            on_reset()
         obs, info = env.reset()
         reward, terminated, truncated = 0.0, False, False
     else:
         obs, reward, terminated, truncated, info = env.step(action)
         if same_step and (terminated or truncated):
             final_obs, final_info = obs, info
+            if on_reset is not None:
+                on_reset()
             obs, info = env.reset()
             info = {"final_obs": final_obs, "final_info": final_info, **info}
     _write(space, buffer, index, obs)
@@ -751,7 +760,11 @@ class _Board:
     ``ctrl``: the number of the step posted, its SAME_STEP flag, then per worker the
     number of the last step whose results it wrote, whether it sleeps on its pipe (past
     its spin: the parent wakes it with a message) and how many info layouts it sent
-    through the pipe (the parent checks it learnt as many). Per env: its action, its autoreset
+    through the pipe (the parent checks it learnt as many); the number of the last step
+    this process's own envs took; per lane (this process's first) the number of the
+    last step in which one of its envs reset (it says so as the reset begins: the other
+    lanes, done with their step, prepare their next resets meanwhile, ``_Idle``). Per
+    env: its action, its autoreset
     flag, reward, terminated and truncated, and its info's floats and ints (in the order
     of its keys; the keys, types and strings are its layout, ``_layout``, which both sides
     learn from the infos that went through the pipe)."""
@@ -761,7 +774,9 @@ class _Board:
         size = int(np.prod(action_shape, dtype=np.int64))
         self.asleep = lanes  # ctrl[asleep + w]: worker w blocks on its pipe (wake it)
         self.layouts = 2 * lanes  # ctrl[layouts + w]: layouts worker w sent by pipe
-        self._raw = (ctx.RawArray(ctypes.c_int64, 3 * lanes),
+        self.parent_done = 3 * lanes  # ctrl[parent_done]: the last step this process took
+        self.resetting = 3 * lanes + 1  # ctrl[resetting + l]: the last step lane l reset in
+        self._raw = (ctx.RawArray(ctypes.c_int64, 4 * lanes + 1),
                      ctx.RawArray(ctypes.c_double, num_envs * size),
                      ctx.RawArray(ctypes.c_uint8, num_envs),
                      ctx.RawArray(ctypes.c_double, num_envs),
@@ -784,7 +799,8 @@ class _Board:
 
     def __getstate__(self) -> dict[str, Any]:  # to a spawned worker: the shared memory
         return {"_raw": self._raw, "_shape": self._shape, "asleep": self.asleep,
-                "layouts": self.layouts}
+                "layouts": self.layouts, "parent_done": self.parent_done,
+                "resetting": self.resetting}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
@@ -843,44 +859,92 @@ def _read_results(board: _Board, start: int, stop: int, known: list[tuple | None
     return out
 
 
-def _others_reset(autoreset: np.ndarray, start: int, stop: int) -> bool:
-    """Whether envs outside ``start:stop`` reset in this step and none inside does: the
-    lane stepping ``start:stop`` will wait ≈ a reset's extra time (≈ 3 ms) for them."""
-    if not autoreset.any():  # most steps: one call, not three (µs a step on each lane)
-        return False
-    return bool(not autoreset[start:stop].any()
-                and (autoreset[:start].any() or autoreset[stop:].any()))
-
-
-def _prepare_resets(envs: list[gym.Env]) -> None:
+def _prepare_resets(envs: list[gym.Env], stop: Callable[[], bool] | None = None) -> None:
     """``prepare_reset`` on each env (a lane with time to spare: while another lane
-    resets, it generates its envs' next tracks and builds their scenes, ≈ 2 ms of each of
-    their resets, so that the others wait less on them); never fails the lane (a reset
-    that would fail still fails, then, as it would have)."""
+    resets, it generates its envs' next tracks, builds their scenes and paints their
+    first frames, ≈ 1.5 ms of each of their resets, so that the others wait less on them)
+    until ``stop()`` says the spare time is over (the other lanes are done: going on would
+    make them wait); never fails the lane (a reset that would fail still fails, then, as
+    it would have)."""
     for env in envs:
+        if stop is not None and stop():
+            return
         with contextlib.suppress(Exception):
-            env.unwrapped.prepare_reset()  # type: ignore[attr-defined]
+            env.unwrapped.prepare_reset(stop)  # type: ignore[attr-defined]
 
 
-def _await_answer(conn: Connection, board: _Board, lane: int, seq: int) -> Any:
+class _Idle:
+    """What a lane does with its time to spare in a step (this process while it waits for
+    the workers, a worker while it waits for the next step): if another lane resets an
+    env in that step (its flag on the board, set as the reset begins: ``mark``), it
+    prepares its own envs' next resets (``_prepare_resets``) until every other lane has
+    taken the step, at most once a step. A reset costs 3–8 steps' time; the lanes step
+    in lockstep, so without this the others would only wait."""
+
+    __slots__ = ("_busy", "_ctrl", "_envs", "_last", "_others", "mark")
+
+    def __init__(self, board: _Board, lane: int, envs: list[gym.Env]) -> None:
+        ctrl = self._ctrl = board.ctrl
+        lanes = board.asleep
+        self._envs = envs
+        self._others = [board.resetting + other for other in range(lanes) if other != lane]
+        # Where the other lanes say they took a step: this process after its own envs,
+        # the workers as they hand their results over.
+        self._busy = [board.parent_done] * (lane != 0) + [
+            1 + w for w in range(1, lanes) if w != lane]
+        self._last = -1
+        self.mark = functools.partial(_mark_reset, ctrl, board.resetting + lane)
+
+    def __call__(self, seq: int) -> bool:
+        """Prepare if another lane resets in step ``seq``; whether it did (then not
+        again this step)."""
+        if self._last == seq:
+            return False
+        ctrl = self._ctrl
+        for slot in self._others:
+            if ctrl[slot] == seq:
+                self._last = seq
+                _prepare_resets(self._envs, lambda: self.done(seq))
+                return True
+        return False
+
+    def done(self, seq: int) -> bool:
+        """Whether every other lane has taken step ``seq`` (a worker whose results went
+        through its pipe counts as busy)."""
+        ctrl = self._ctrl
+        return all(ctrl[slot] == seq for slot in self._busy)
+
+
+def _mark_reset(ctrl: np.ndarray, slot: int) -> None:
+    """Say on the board that a lane resets an env in the step posted (``_Idle.mark``)."""
+    ctrl[slot] = ctrl[0]
+
+
+def _await_answer(conn: Connection, board: _Board, lane: int, seq: int,
+                  idle: _Idle | None = None) -> Any:
     """Wait for worker ``lane``'s results of step ``seq``: None when they are on the
     board, else the next message on its pipe (its answer ``(ok, data, seq)``: an error,
     or infos the board cannot hold; or an older answer). Spins: the worker is stepping on
-    another core. A dead worker's pipe raises EOFError here."""
+    another core; meanwhile ``idle(seq)`` (``_Idle``), until it did something. A dead
+    worker's pipe raises EOFError here."""
     done = board.ctrl
     while True:
         if done[1 + lane] == seq:
             return None
         if conn.poll(0):
             return conn.recv()
-        os.sched_yield()
+        if idle is not None and idle(seq):
+            idle = None
+        else:
+            os.sched_yield()
 
 
 def _await_command(conn: Connection, board: _Board | None, seen: int, spin_s: float,
-                   lane: int = 1) -> Any:
+                   lane: int = 1, idle: _Idle | None = None) -> Any:
     """Worker ``lane``'s next command: ``("post", n)`` when step ``n`` is on the board,
-    else the pipe's next message; polled for up to ``spin_s``, then slept for on the
-    pipe: the worker says so on the board and the parent, posting a step, sends a
+    else the pipe's next message; polled for up to ``spin_s`` (meanwhile ``idle(seen)``,
+    ``_Idle``, until it did something; the spin starts again after it), then slept for
+    on the pipe: the worker says so on the board and the parent, posting a step, sends a
     wake-up. (x86 may order the parent's read of that flag before its write of the step
     number: a missed wake-up costs one nap, ``BOARD_NAP_S``.)"""
     if board is None:
@@ -896,6 +960,9 @@ def _await_command(conn: Connection, board: _Board | None, seen: int, spin_s: fl
                 message = conn.recv()
                 if message[0] != "wake":
                     return message
+            elif idle is not None and idle(seen):
+                idle = None
+                deadline = time.perf_counter() + spin_s
             elif ctrl[asleep]:
                 conn.poll(BOARD_NAP_S)  # until a message (a wake-up) or the nap's end
             elif time.perf_counter() < deadline:
@@ -936,8 +1003,9 @@ def _worker(conn: Connection, shm: Any, space: gym.Space,
         conn.send((True, None))
         seen = 0  # the last step taken from the board
         known: list[tuple | None] = [None] * (stop - start)  # as the parent's _known
+        idle = _Idle(board, lane, envs) if board is not None else None
         while True:
-            command, data = _await_command(conn, board, seen, WAIT_SPIN_S, lane)
+            command, data = _await_command(conn, board, seen, WAIT_SPIN_S, lane, idle)
             if command == "post":
                 assert board is not None
                 seen = data
@@ -945,7 +1013,7 @@ def _worker(conn: Connection, shm: Any, space: gym.Space,
                     answer = _step_envs(envs, space, buffer, start,
                                         board.actions[start:stop].copy(),
                                         board.autoreset[start:stop].astype(np.bool_),
-                                        bool(board.ctrl[1]))
+                                        bool(board.ctrl[1]), idle.mark)  # type: ignore[union-attr]
                     if _post_results(board, start, answer, known):
                         board.ctrl[1 + lane] = seen  # last: it hands the results over
                     else:
@@ -956,9 +1024,6 @@ def _worker(conn: Connection, shm: Any, space: gym.Space,
                 except Exception as exc:  # reported to the parent, raised there
                     conn.send((False, (type(exc).__name__, str(exc), traceback.format_exc()),
                                seen))
-                    continue
-                if _others_reset(board.autoreset, start, stop):
-                    _prepare_resets(envs)
                 continue
             try:
                 if command == "step":

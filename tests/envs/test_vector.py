@@ -387,23 +387,130 @@ def test_the_board_carries_infos_exactly_or_refuses_them() -> None:
     assert _layout({f"k{i}": 1.0 for i in range(BOARD_INFO_SLOTS)}) is not None
 
 
-@pytest.mark.parametrize(("flags", "start", "stop", "want"), [
-    ([0, 0, 0, 0], 0, 2, False),   # nobody resets
-    ([0, 0, 1, 0], 0, 2, True),    # only another lane's env
-    ([1, 0, 1, 0], 0, 2, False),   # this lane resets too: no time to spare
-    ([0, 1, 0, 0], 0, 2, False),   # only this lane
-    ([1, 0, 0, 0], 2, 4, True),    # another lane before this one
-    ([0, 0, 0, 1], 1, 3, True),    # … or after it
-    ([0, 1, 0, 0], 2, 4, True),    # the env just before this lane's first
-    ([0, 1, 1, 0], 0, 2, False),   # this lane's last env resets
-    ([0, 1, 0, 0], 2, 2, True),    # a lane of no envs
-])
-def test_a_lane_prepares_resets_only_while_only_other_lanes_reset(
-        flags: list[int], start: int, stop: int, want: bool) -> None:
-    from tfalda_sim.envs.vector import _others_reset
+class _Preparing:
+    """An env's ``unwrapped`` as ``_Idle`` sees it: records each ``prepare_reset(stop)``
+    and what ``stop()`` said then; ``then`` runs after (a lane finishing meanwhile)."""
 
-    for dtype in (np.bool_, np.uint8):  # this process's flags, the board's
-        assert _others_reset(np.array(flags, dtype), start, stop) is want
+    def __init__(self, then: Any = None) -> None:
+        self.calls: list[bool] = []
+        self.then = then
+        self.unwrapped = self
+
+    def prepare_reset(self, stop: Any) -> bool:
+        self.calls.append(stop())
+        if self.then is not None:
+            self.then()
+        return True
+
+
+def _board(lanes: int) -> Any:
+    import multiprocessing
+
+    from tfalda_sim.envs.vector import _Board
+    return _Board(multiprocessing.get_context("spawn"), 2 * lanes, (1,), lanes)
+
+
+@pytest.mark.parametrize("lane", [0, 1, 2])
+def test_a_lane_prepares_while_another_lane_resets_until_the_others_are_done(
+        lane: int) -> None:
+    """``_Idle`` of a lane of three: nothing while no other lane resets in the step (its
+    own reset does not count), then ``prepare_reset`` on its envs with a ``stop`` that
+    says whether every other lane took the step (this process after its own envs, the
+    workers when they hand their results over), at most once a step; ``mark`` flags the
+    lane's reset in the step posted."""
+    from tfalda_sim.envs.vector import _Idle
+
+    board = _board(3)
+    ctrl = board.ctrl
+    done = [board.parent_done] + [1 + w for w in (1, 2)]
+    others_done = done[:lane] + done[lane + 1:]
+
+    def finish() -> None:  # the other lanes take step ctrl[0]
+        for slot in others_done:
+            ctrl[slot] = ctrl[0]
+
+    first, second = _Preparing(then=finish), _Preparing()
+    idle = _Idle(board, lane, [first, second])
+    seq = ctrl[0] = 7
+    assert not idle(seq) and not first.calls  # nobody resets
+    idle.mark()
+    assert ctrl[board.resetting + lane] == seq
+    assert not idle(seq) and not first.calls  # only this lane
+    other = (lane + 1) % 3
+    _Idle(board, other, []).mark()
+    assert idle(seq)
+    # The others still stepped when it began, and were done after the first env.
+    assert first.calls == [False] and second.calls == []
+    assert not idle(seq) and len(first.calls) == 1  # once a step
+    ctrl[0] = 8
+    _Idle(board, other, []).mark()  # the other lane resets in step 8 too
+    assert idle(8) and first.calls == [False, False]
+    assert not idle(9)  # flags of older steps count no more
+
+
+def test_waits_prepare_resets_while_another_lane_resets() -> None:
+    """This process waiting for a worker's results, and a worker waiting for the next
+    step: each prepares its envs' next resets when another lane resets in the step (and
+    goes on waiting), until the others are done."""
+    from tfalda_sim.envs.vector import _await_answer, _await_command, _Idle
+
+    class Quiet:  # a pipe with nothing on it (a wait that never ends fails instead)
+        polls = 0
+
+        def poll(self, timeout: float = 0.0) -> bool:
+            self.polls += 1
+            assert self.polls < 100_000, "waited on and on: nothing was prepared"
+            return False
+
+    board = _board(2)
+    ctrl = board.ctrl
+    seq = ctrl[0] = 3
+    # This process waits for worker 1, which resets; the worker is done after one stage.
+    parent_env = _Preparing(then=lambda: ctrl.__setitem__(2, seq))
+    _Idle(board, 1, []).mark()
+    assert _await_answer(Quiet(), board, 1, seq, _Idle(board, 0, [parent_env])) is None
+    assert parent_env.calls == [False]
+    # Worker 1 waits for step 4 while this process resets in step 3 and then posts.
+    worker_env = _Preparing(then=lambda: ctrl.__setitem__(0, seq + 1))
+    _Idle(board, 0, []).mark()
+    assert _await_command(Quiet(), board, seq, 0.5, 1, _Idle(board, 1, [worker_env])) == (
+        "post", seq + 1)
+    assert worker_env.calls == [False]
+
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_a_worker_prepares_its_next_reset_while_this_process_resets(
+        mode: AutoresetMode) -> None:
+    """Two envs, in both autoreset modes: while the env this process steps resets (made
+    slow here), the worker generates its env's next track, builds its scene and paints
+    its first frame (a later ``prepare_reset`` finds nothing to do), and the rollout
+    equals ``SyncVectorEnv``'s."""
+    venv = TfaldaTrackVectorEnv(2, workers=2, autoreset_mode=mode)
+    sync = gym.make_vec("TfaldaTrack-v0", num_envs=2, vectorization_mode="sync",
+                        vector_kwargs={"autoreset_mode": mode})
+    try:
+        assert_same(venv.reset(seed=5), sync.reset(seed=5))
+        env0 = venv._local[0].unwrapped
+        real = env0.reset
+
+        def slow(**kw: Any) -> Any:
+            time.sleep(0.5)
+            return real(**kw)
+
+        env0.reset = slow
+        action = np.array([[1.0], [0.0]], np.float32)  # env 0 leaves the road
+        for _ in range(200):
+            assert_same(venv.step(action), sync.step(action))
+            if venv.call_on([0], "_step_count") == (0,):  # env 0 has reset
+                break
+        else:
+            pytest.fail("env 0 never left the road")
+        assert venv.call_on([1], "prepare_reset") == (False,)  # prepared already
+        for _ in range(60):
+            assert_same(venv.step(action[::-1]), sync.step(action[::-1]))
+    finally:
+        venv.close()
+        sync.close()
 
 
 def _abandon_next_wait(monkeypatch: pytest.MonkeyPatch) -> None:
