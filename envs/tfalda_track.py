@@ -8,7 +8,6 @@ the reward comes from the track geometry. Every stage lives in ``tfalda_sim`` an
 
 from __future__ import annotations
 
-import copy
 import math
 import os
 from collections.abc import Callable, Mapping, Sequence
@@ -458,7 +457,11 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         state = self._np_random.bit_generator.state
         if self._prepared_for == state:
             return False  # prepared already, all stages, for this state of np_random
-        peek = np.random.Generator(copy.deepcopy(self._np_random.bit_generator))
+        # A copy of np_random to draw from as the reset will (a new bit generator given
+        # the state costs a tenth of a deepcopy's ≈ 0.2 ms in context).
+        bits = type(self._np_random.bit_generator)(0)
+        bits.state = state
+        peek = np.random.Generator(bits)
         spec = int(peek.integers(*self.track_seeds))
         if self._prepared is None or self._prepared[0] != spec:
             track = resolve_track(spec, self.obstacles)

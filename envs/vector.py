@@ -274,7 +274,7 @@ class TfaldaTrackVectorEnv(VectorEnv):
             answers = _step_envs(self._local, self.single_observation_space,
                                  self._observations, 0, acts[:n0], self._autoreset[:n0],
                                  same_step, self._idle.mark)
-            board.ctrl[board.parent_done] = self._seq
+            board.ctrl[board.finished] = self._seq
             ahead = _MergeAhead.of(answers[0][3], self.num_envs) if merge else None
             if ahead is not None and not all(ahead.fill(i, a[3]) for i, a in enumerate(answers)):
                 ahead = None
@@ -760,11 +760,11 @@ class _Board:
     ``ctrl``: the number of the step posted, its SAME_STEP flag, then per worker the
     number of the last step whose results it wrote, whether it sleeps on its pipe (past
     its spin: the parent wakes it with a message) and how many info layouts it sent
-    through the pipe (the parent checks it learnt as many); the number of the last step
-    this process's own envs took; per lane (this process's first) the number of the
-    last step in which one of its envs reset (it says so as the reset begins: the other
-    lanes, done with their step, prepare their next resets meanwhile, ``_Idle``). Per
-    env: its action, its autoreset
+    through the pipe (the parent checks it learnt as many); per lane (this process's
+    first) the number of the last step in which one of its envs reset (it says so as
+    the reset begins: the other lanes, done with their step, prepare their next resets
+    meanwhile, ``_Idle``) and the number of the last step it took (results on the board
+    or in the pipe: the others' preparation ends). Per env: its action, its autoreset
     flag, reward, terminated and truncated, and its info's floats and ints (in the order
     of its keys; the keys, types and strings are its layout, ``_layout``, which both sides
     learn from the infos that went through the pipe)."""
@@ -774,9 +774,9 @@ class _Board:
         size = int(np.prod(action_shape, dtype=np.int64))
         self.asleep = lanes  # ctrl[asleep + w]: worker w blocks on its pipe (wake it)
         self.layouts = 2 * lanes  # ctrl[layouts + w]: layouts worker w sent by pipe
-        self.parent_done = 3 * lanes  # ctrl[parent_done]: the last step this process took
-        self.resetting = 3 * lanes + 1  # ctrl[resetting + l]: the last step lane l reset in
-        self._raw = (ctx.RawArray(ctypes.c_int64, 4 * lanes + 1),
+        self.resetting = 3 * lanes  # ctrl[resetting + l]: the last step lane l reset in
+        self.finished = 4 * lanes  # ctrl[finished + l]: the last step lane l took
+        self._raw = (ctx.RawArray(ctypes.c_int64, 5 * lanes),
                      ctx.RawArray(ctypes.c_double, num_envs * size),
                      ctx.RawArray(ctypes.c_uint8, num_envs),
                      ctx.RawArray(ctypes.c_double, num_envs),
@@ -799,8 +799,8 @@ class _Board:
 
     def __getstate__(self) -> dict[str, Any]:  # to a spawned worker: the shared memory
         return {"_raw": self._raw, "_shape": self._shape, "asleep": self.asleep,
-                "layouts": self.layouts, "parent_done": self.parent_done,
-                "resetting": self.resetting}
+                "layouts": self.layouts, "resetting": self.resetting,
+                "finished": self.finished}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
@@ -888,10 +888,7 @@ class _Idle:
         lanes = board.asleep
         self._envs = envs
         self._others = [board.resetting + other for other in range(lanes) if other != lane]
-        # Where the other lanes say they took a step: this process after its own envs,
-        # the workers as they hand their results over.
-        self._busy = [board.parent_done] * (lane != 0) + [
-            1 + w for w in range(1, lanes) if w != lane]
+        self._busy = [board.finished + other for other in range(lanes) if other != lane]
         self._last = -1
         self.mark = functools.partial(_mark_reset, ctrl, board.resetting + lane)
 
@@ -909,8 +906,8 @@ class _Idle:
         return False
 
     def done(self, seq: int) -> bool:
-        """Whether every other lane has taken step ``seq`` (a worker whose results went
-        through its pipe counts as busy)."""
+        """Whether every other lane has taken step ``seq`` (this process: its own envs;
+        a worker: its results are on the board or in its pipe)."""
         ctrl = self._ctrl
         return all(ctrl[slot] == seq for slot in self._busy)
 
@@ -1024,6 +1021,7 @@ def _worker(conn: Connection, shm: Any, space: gym.Space,
                 except Exception as exc:  # reported to the parent, raised there
                     conn.send((False, (type(exc).__name__, str(exc), traceback.format_exc()),
                                seen))
+                board.ctrl[board.finished + lane] = seen
                 continue
             try:
                 if command == "step":

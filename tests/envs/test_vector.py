@@ -422,7 +422,7 @@ def test_a_lane_prepares_while_another_lane_resets_until_the_others_are_done(
 
     board = _board(3)
     ctrl = board.ctrl
-    done = [board.parent_done] + [1 + w for w in (1, 2)]
+    done = [board.finished + other for other in range(3)]
     others_done = done[:lane] + done[lane + 1:]
 
     def finish() -> None:  # the other lanes take step ctrl[0]
@@ -466,7 +466,7 @@ def test_waits_prepare_resets_while_another_lane_resets() -> None:
     ctrl = board.ctrl
     seq = ctrl[0] = 3
     # This process waits for worker 1, which resets; the worker is done after one stage.
-    parent_env = _Preparing(then=lambda: ctrl.__setitem__(2, seq))
+    parent_env = _Preparing(then=lambda: ctrl.__setitem__(2, seq))  # results on the board
     _Idle(board, 1, []).mark()
     assert _await_answer(Quiet(), board, 1, seq, _Idle(board, 0, [parent_env])) is None
     assert parent_env.calls == [False]
@@ -484,7 +484,7 @@ def test_a_worker_prepares_its_next_reset_while_this_process_resets(
     """Two envs, in both autoreset modes: while the env this process steps resets (made
     slow here), the worker generates its env's next track, builds its scene and paints
     its first frame (a later ``prepare_reset`` finds nothing to do), and the rollout
-    equals ``SyncVectorEnv``'s."""
+    equals ``SyncVectorEnv``'s. Both lanes say on the board when they took a step."""
     venv = TfaldaTrackVectorEnv(2, workers=2, autoreset_mode=mode)
     sync = gym.make_vec("TfaldaTrack-v0", num_envs=2, vectorization_mode="sync",
                         vector_kwargs={"autoreset_mode": mode})
@@ -499,8 +499,12 @@ def test_a_worker_prepares_its_next_reset_while_this_process_resets(
 
         env0.reset = slow
         action = np.array([[1.0], [0.0]], np.float32)  # env 0 leaves the road
+        board = venv._board
         for _ in range(200):
             assert_same(venv.step(action), sync.step(action))
+            # Both lanes said they took the step, the worker also when its results went
+            # through its pipe (SAME_STEP: a reset's final observation).
+            assert board.ctrl[board.finished] == board.ctrl[board.finished + 1] == venv._seq
             if venv.call_on([0], "_step_count") == (0,):  # env 0 has reset
                 break
         else:
