@@ -124,13 +124,17 @@ def serve_turns() -> None:
 
 
 class _TurnChild:
-    """A ``serve_turns`` process of one checkout, pinned to ``core``."""
+    """A child process of one checkout that answers commands in turns: by default
+    ``serve_turns`` pinned to ``core``; else ``script`` run with ``args`` (``bench_vec_ab``).
+    It says ``ready`` first, then one JSON line per command."""
 
-    def __init__(self, python: str, core: int, who: str) -> None:
+    def __init__(self, python: str, core: int, who: str, script: Path | None = None,
+                 args: tuple[str, ...] = ()) -> None:
         self.who = who
-        self.proc = subprocess.Popen(
-            [python, str(Path(__file__).resolve()), TURNS_FLAG, str(core)],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        command = ([python, str(script), *args] if script is not None
+                   else [python, str(Path(__file__).resolve()), TURNS_FLAG, str(core)])
+        self.proc = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     stderr=subprocess.PIPE, text=True)
         self._read()  # ready
 
     def _read(self) -> dict[str, Any]:

@@ -185,6 +185,35 @@ def test_bench_ab_refuses_a_missing_interpreter() -> None:
     assert "Traceback" not in done.stderr
 
 
+def test_bench_vec_ab_takes_turns_with_the_vector_envs() -> None:
+    """``bench_vec_ab.py``: this checkout against itself, every vector env figure of both
+    sides, their ratio, each side's 2 envs / 1 env and the per-round ratios' quartiles."""
+    result = run_json("bench_vec_ab.py", "--other", sys.executable, "--rounds", "3",
+                      "--turn-steps", "40")
+    assert (result["rounds"], result["turn_steps"]) == (3, 40) and not result["interrupted"]
+    keys = {"2", "2same", "1"}
+    assert set(result["figures"]) == keys
+    for side in ("this", "other", "ratio"):
+        assert set(result[side]) == keys | {"2/1"}
+        assert all(v > 0 for v in result[side].values())
+    for side in ("this", "other"):
+        assert result[side]["2/1"] == pytest.approx(result[side]["2"] / result[side]["1"])
+    for key, (q1, median, q3) in result["per_round_ratio_quartiles"].items():
+        assert key in keys and 0 < q1 <= median <= q3
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--other", "/nonexistent/python"], "not an executable file"),
+    (["--other", sys.executable, "--rounds", "0"], "--rounds must be"),
+    (["--other", sys.executable, "--turn-steps", "1000001"], "--turn-steps must be"),
+])
+def test_bench_vec_ab_refuses_bad_arguments(args: list[str], message: str) -> None:
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_vec_ab.py"), *args],
+                          capture_output=True, text=True, timeout=60, check=False)
+    assert done.returncode == 2 and message in done.stderr
+    assert "Traceback" not in done.stderr
+
+
 EPISODE_STEPS = 7
 """Steps of an episode of the benchmark tests' stand-in envs."""
 
