@@ -27,6 +27,7 @@ import argparse
 import contextlib
 import json
 import os
+import signal
 import statistics
 import subprocess
 import sys
@@ -81,7 +82,9 @@ def serve_turns() -> None:
     """A ``--turns`` child: this interpreter's envs, stepped on command. Reads lines
     ``fixed N``, ``generated N`` (N random-action steps, resets included) or ``reset N``
     (N resets onto new tracks) from stdin and answers each with a JSON line: the seconds
-    taken (``times``: each reset's); ``quit`` or the end of stdin ends it."""
+    taken (``times``: each reset's); ``quit`` or the end of stdin ends it. Ignores Ctrl-C:
+    the parent reports what was finished, then ends it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     import cv2
     import gymnasium as gym
 

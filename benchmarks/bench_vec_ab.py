@@ -3,11 +3,11 @@ one env"): this checkout against another one, in turns, so that the host's drift
 within minutes here) falls on both alike.
 
     python benchmarks/bench_vec_ab.py --other /path/to/old/checkout/.venv/bin/python \\
-        [--rounds 40] [--turn-steps 1500] [--json]
+        [--rounds 40] [--turn-steps 1500] [--warmup-steps 1500] [--json]
 
 Each checkout runs in a child process of its own (its ``make install``'s Python) holding
 three vector envs in "lanes" mode on default generated tracks, each warmed up
-(``WARMUP_STEPS`` vector steps) and stepped with uniformly random actions from a seeded
+(``--warmup-steps`` vector steps) and stepped with uniformly random actions from a seeded
 generator of its own:
 
 - ``2 envs``: ``gymnasium.make_vec(…, num_envs=2)``, ``NEXT_STEP`` autoreset, ``step``
@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
 import time
 from pathlib import Path
@@ -40,20 +41,23 @@ from bench_ab import _status, _TurnChild
 CHILD_FLAG = "--child"
 
 WARMUP_STEPS = 1500
-"""Vector steps each env takes before the first round (its processes page their scenes'
-memory in; a training run's steady state)."""
+"""Vector steps each env takes before the first round, by default (its processes page
+their scenes' memory in; a training run's steady state)."""
 
 MAX_TURN_STEPS = 100_000
-"""Largest ``--turn-steps`` (a turn's actions are drawn at once: bounded memory)."""
+"""Largest ``--turn-steps`` and ``--warmup-steps`` (their actions are drawn at once:
+bounded memory)."""
 
 FIGURES = (("2", "2 envs"), ("2same", "2 envs, SAME_STEP"), ("1", "1 env"))
 """Each checkout's figures: key, label."""
 
 
-def serve() -> None:
+def serve(warmup_steps: int) -> None:
     """A child: this interpreter's vector envs, stepped on command. Reads lines ``KEY N``
     (N vector steps of figure KEY) from stdin and answers each with a JSON line, the
-    seconds taken; ``quit`` or the end of stdin ends it."""
+    seconds taken; ``quit`` or the end of stdin ends it. Ignores Ctrl-C: the parent
+    reports what was finished, then ends it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     import gymnasium as gym
     import numpy as np
     from gymnasium.vector import AutoresetMode
@@ -70,7 +74,7 @@ def serve() -> None:
     try:
         for key, env in envs.items():
             env.reset(seed=0)
-            for action in rngs[key].uniform(-1.0, 1.0, (WARMUP_STEPS, *env.action_space.shape)):
+            for action in rngs[key].uniform(-1.0, 1.0, (warmup_steps, *env.action_space.shape)):
                 steppers[key](action.astype(np.float32))
         print(json.dumps({"ready": True}), flush=True)
         for line in sys.stdin:
@@ -94,7 +98,8 @@ def _quartiles(values: list[float]) -> list[float]:
     return [float(q) for q in np.percentile(values, [25, 50, 75])] if values else []
 
 
-def run(other: str, rounds: int, turn_steps: int, quiet: bool) -> dict[str, Any]:
+def run(other: str, rounds: int, turn_steps: int, warmup_steps: int, quiet: bool
+        ) -> dict[str, Any]:
     script = Path(__file__).resolve()
     seconds = {side: {key: 0.0 for key, _ in FIGURES} for side in ("this", "other")}
     per_round: dict[str, list[float]] = {key: [] for key, _ in FIGURES}
@@ -102,8 +107,9 @@ def run(other: str, rounds: int, turn_steps: int, quiet: bool) -> dict[str, Any]
     children: dict[str, _TurnChild] = {}
     interrupted = False
     try:
-        children["this"] = _TurnChild(sys.executable, 0, "this", script, (CHILD_FLAG,))
-        children["other"] = _TurnChild(other, 0, "other", script, (CHILD_FLAG,))
+        args = (CHILD_FLAG, str(warmup_steps))
+        children["this"] = _TurnChild(sys.executable, 0, "this", script, args)
+        children["other"] = _TurnChild(other, 0, "other", script, args)
         while done < rounds:
             order = ("this", "other") if done % 2 == 0 else ("other", "this")
             took: dict[str, dict[str, float]] = {side: {} for side in order}
@@ -131,7 +137,7 @@ def run(other: str, rounds: int, turn_steps: int, quiet: bool) -> dict[str, Any]
             figures[side][key] = envs * turn_steps * done / took_s if took_s else float("nan")
         figures[side]["2/1"] = figures[side]["2"] / figures[side]["1"]
     return {"machine": {"cores": os.cpu_count(), **cpu()}, "other_python": other,
-            "rounds": done, "turn_steps": turn_steps, "warmup_steps": WARMUP_STEPS,
+            "rounds": done, "turn_steps": turn_steps, "warmup_steps": warmup_steps,
             "figures": {key: label for key, label in FIGURES},
             "this": figures["this"], "other": figures["other"],
             "ratio": {key: figures["this"][key] / figures["other"][key]
@@ -143,7 +149,7 @@ def run(other: str, rounds: int, turn_steps: int, quiet: bool) -> dict[str, Any]
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == [CHILD_FLAG]:
-        serve()
+        serve(int(argv[1]))
         return 0
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--other", required=True,
@@ -151,8 +157,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rounds", type=int, default=40, help="rounds of turns")
     parser.add_argument("--turn-steps", type=int, default=1500,
                         help="vector steps of each figure per turn")
+    parser.add_argument("--warmup-steps", type=int, default=WARMUP_STEPS,
+                        help="vector steps of each env before the first round")
     parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
     args = parser.parse_args(argv)
+    if not 0 <= args.warmup_steps <= MAX_TURN_STEPS:
+        parser.error(f"--warmup-steps must be in 0…{MAX_TURN_STEPS}, got {args.warmup_steps}")
     if args.rounds < 1:
         parser.error(f"--rounds must be ≥ 1, got {args.rounds}")
     if not 1 <= args.turn_steps <= MAX_TURN_STEPS:
@@ -161,7 +171,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--other {args.other!r} is not an executable file: give the other "
                      "checkout's Python, e.g. /path/to/checkout/.venv/bin/python")
     try:
-        result = run(args.other, args.rounds, args.turn_steps, quiet=args.json)
+        result = run(args.other, args.rounds, args.turn_steps, args.warmup_steps,
+                     quiet=args.json)
     except RuntimeError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

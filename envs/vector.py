@@ -271,10 +271,12 @@ class TfaldaTrackVectorEnv(VectorEnv):
                 with contextlib.suppress(OSError):
                     conn.send(_WAKE)
         try:
-            answers = _step_envs(self._local, self.single_observation_space,
-                                 self._observations, 0, acts[:n0], self._autoreset[:n0],
-                                 same_step, self._idle.mark)
-            board.ctrl[board.finished] = self._seq
+            try:
+                answers = _step_envs(self._local, self.single_observation_space,
+                                     self._observations, 0, acts[:n0], self._autoreset[:n0],
+                                     same_step, self._idle.mark)
+            finally:  # also after an error: a worker preparing meanwhile stops
+                board.ctrl[board.finished] = self._seq
             ahead = _MergeAhead.of(answers[0][3], self.num_envs) if merge else None
             if ahead is not None and not all(ahead.fill(i, a[3]) for i, a in enumerate(answers)):
                 ahead = None
@@ -774,6 +776,7 @@ class _Board:
         size = int(np.prod(action_shape, dtype=np.int64))
         self.asleep = lanes  # ctrl[asleep + w]: worker w blocks on its pipe (wake it)
         self.layouts = 2 * lanes  # ctrl[layouts + w]: layouts worker w sent by pipe
+        self.lanes = lanes
         self.resetting = 3 * lanes  # ctrl[resetting + l]: the last step lane l reset in
         self.finished = 4 * lanes  # ctrl[finished + l]: the last step lane l took
         self._raw = (ctx.RawArray(ctypes.c_int64, 5 * lanes),
@@ -800,7 +803,7 @@ class _Board:
     def __getstate__(self) -> dict[str, Any]:  # to a spawned worker: the shared memory
         return {"_raw": self._raw, "_shape": self._shape, "asleep": self.asleep,
                 "layouts": self.layouts, "resetting": self.resetting,
-                "finished": self.finished}
+                "finished": self.finished, "lanes": self.lanes}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
@@ -885,7 +888,7 @@ class _Idle:
 
     def __init__(self, board: _Board, lane: int, envs: list[gym.Env]) -> None:
         ctrl = self._ctrl = board.ctrl
-        lanes = board.asleep
+        lanes = board.lanes
         self._envs = envs
         self._others = [board.resetting + other for other in range(lanes) if other != lane]
         self._busy = [board.finished + other for other in range(lanes) if other != lane]
@@ -907,9 +910,10 @@ class _Idle:
 
     def done(self, seq: int) -> bool:
         """Whether every other lane has taken step ``seq`` (this process: its own envs;
-        a worker: its results are on the board or in its pipe)."""
+        a worker: its results are on the board or in its pipe), or a later one (step
+        numbers only grow: a lane may be on to the next step before this one looks)."""
         ctrl = self._ctrl
-        return all(ctrl[slot] == seq for slot in self._busy)
+        return all(ctrl[slot] >= seq for slot in self._busy)
 
 
 def _mark_reset(ctrl: np.ndarray, slot: int) -> None:
@@ -959,6 +963,7 @@ def _await_command(conn: Connection, board: _Board | None, seen: int, spin_s: fl
                     return message
             elif idle is not None and idle(seen):
                 idle = None
+                ctrl[asleep] = 0  # spinning again (a wake-up sent meanwhile is skipped)
                 deadline = time.perf_counter() + spin_s
             elif ctrl[asleep]:
                 conn.poll(BOARD_NAP_S)  # until a message (a wake-up) or the nap's end
@@ -1012,16 +1017,18 @@ def _worker(conn: Connection, shm: Any, space: gym.Space,
                                         board.autoreset[start:stop].astype(np.bool_),
                                         bool(board.ctrl[1]), idle.mark)  # type: ignore[union-attr]
                     if _post_results(board, start, answer, known):
+                        board.ctrl[board.finished + lane] = seen  # before the hand-over
                         board.ctrl[1 + lane] = seen  # last: it hands the results over
                     else:
                         layouts = [_layout(a[3]) for a in answer]
+                        board.ctrl[board.finished + lane] = seen
                         conn.send((True, answer, seen))
                         known = layouts
                         board.ctrl[board.layouts + lane] += 1
                 except Exception as exc:  # reported to the parent, raised there
+                    board.ctrl[board.finished + lane] = seen
                     conn.send((False, (type(exc).__name__, str(exc), traceback.format_exc()),
                                seen))
-                board.ctrl[board.finished + lane] = seen
                 continue
             try:
                 if command == "step":

@@ -189,8 +189,9 @@ def test_bench_vec_ab_takes_turns_with_the_vector_envs() -> None:
     """``bench_vec_ab.py``: this checkout against itself, every vector env figure of both
     sides, their ratio, each side's 2 envs / 1 env and the per-round ratios' quartiles."""
     result = run_json("bench_vec_ab.py", "--other", sys.executable, "--rounds", "3",
-                      "--turn-steps", "40")
-    assert (result["rounds"], result["turn_steps"]) == (3, 40) and not result["interrupted"]
+                      "--turn-steps", "40", "--warmup-steps", "30")
+    assert (result["rounds"], result["turn_steps"], result["warmup_steps"]) == (3, 40, 30)
+    assert not result["interrupted"]
     keys = {"2", "2same", "1"}
     assert set(result["figures"]) == keys
     for side in ("this", "other", "ratio"):
@@ -206,6 +207,7 @@ def test_bench_vec_ab_takes_turns_with_the_vector_envs() -> None:
     (["--other", "/nonexistent/python"], "not an executable file"),
     (["--other", sys.executable, "--rounds", "0"], "--rounds must be"),
     (["--other", sys.executable, "--turn-steps", "1000001"], "--turn-steps must be"),
+    (["--other", sys.executable, "--warmup-steps", "-1"], "--warmup-steps must be"),
 ])
 def test_bench_vec_ab_refuses_bad_arguments(args: list[str], message: str) -> None:
     done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_vec_ab.py"), *args],

@@ -425,9 +425,9 @@ def test_a_lane_prepares_while_another_lane_resets_until_the_others_are_done(
     done = [board.finished + other for other in range(3)]
     others_done = done[:lane] + done[lane + 1:]
 
-    def finish() -> None:  # the other lanes take step ctrl[0]
-        for slot in others_done:
-            ctrl[slot] = ctrl[0]
+    def finish() -> None:  # the other lanes take step ctrl[0], the first is on to the next
+        for k, slot in enumerate(others_done):
+            ctrl[slot] = ctrl[0] + (k == 0)
 
     first, second = _Preparing(then=finish), _Preparing()
     idle = _Idle(board, lane, [first, second])
@@ -494,7 +494,7 @@ def test_a_worker_prepares_its_next_reset_while_this_process_resets(
         real = env0.reset
 
         def slow(**kw: Any) -> Any:
-            time.sleep(0.5)
+            time.sleep(1.0)  # the worker prepares in ≈ 3 ms, here and with far more load
             return real(**kw)
 
         env0.reset = slow
