@@ -23,7 +23,9 @@ from __future__ import annotations
 import functools
 import itertools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypeVar
 
 import cv2
 import numpy as np
@@ -38,6 +40,8 @@ from .effects import Effects
 from .obstacles import BoxFaces, draw_faces, visible_faces
 from .pixels import Bonnet, pixel_geometry
 from .scene import LIGHT_RES_M, WALL_TEXEL_M, Scene, _fill_tiles, _needed_tiles
+
+_T = TypeVar("_T")
 
 MOTION_BLUR_SAMPLES: int = 5
 """Sub-frame poses averaged for motion blur."""
@@ -745,26 +749,14 @@ class Renderer:
         the current one)."""
         key = (scene.resolution_m, scene.level_origin.tobytes(), scene.hall,
                scene.wall_origin, scene.wall_size)
-        layout = self._layouts.get(key)
-        if layout is None:
-            layout = self._build_layout(scene)
-            if len(self._layouts) >= 4:
-                self._layouts.pop(next(iter(self._layouts)))
-            self._layouts[key] = layout
-        return layout, key
+        return _cached(self._layouts, key, lambda: self._build_layout(scene)), key
 
     def _layout(self, scene: Scene) -> _Layout:
         return self._scene_data(scene)[0]
 
     def _pixel_layout(self, scene: Scene) -> _PixelLayout:
         key = (scene.resolution_m, scene.levels, scene.hall, scene.wall_size[1])
-        base = self._pixel_layouts.get(key)
-        if base is None:
-            base = self._build_pixel_layout(scene)
-            if len(self._pixel_layouts) >= 4:
-                self._pixel_layouts.pop(next(iter(self._pixel_layouts)))
-            self._pixel_layouts[key] = base
-        return base
+        return _cached(self._pixel_layouts, key, lambda: self._build_pixel_layout(scene))
 
     def _build_pixel_layout(self, scene: Scene) -> _PixelLayout:
         g = self.geometry
@@ -1084,6 +1076,18 @@ class Renderer:
         ox, oy = scene.origin
         return np.array([c * inv, -s * inv, (x - ox) * inv - 0.5,
                          -s * inv, -c * inv, (oy - y) * inv - 0.5])
+
+
+def _cached(cache: dict, key: object, make: Callable[[], _T], size: int = 4) -> _T:
+    """``cache[key]``, made by ``make()`` when missing; past ``size`` entries the oldest
+    goes (a few layouts: the current scene's, a prepared one's, …)."""
+    value = cache.get(key)
+    if value is None:
+        value = make()
+        if len(cache) >= size:
+            cache.pop(next(iter(cache)))
+        cache[key] = value
+    return value
 
 
 def _window_views(boxes: tuple[tuple[int, int, int, int], ...]
