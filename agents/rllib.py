@@ -35,6 +35,7 @@ import numpy as np
 from tqdm import tqdm
 
 from tfalda_sim.interrupts import INTERRUPTS, STOP_SIGNALS, ignoring_stops, is_interrupt
+from tfalda_sim.parallel import RayUnavailable, check_ray_address
 
 from .train import TRAIN_SEEDS, TRAIN_SPEED_M_S, PpoConfig, env_kwargs
 
@@ -228,6 +229,10 @@ def ray_session(address: str | None, num_cpus: int) -> Iterator[None]:
     kwargs: dict[str, Any] = {"include_dashboard": False, "logging_level": logging.ERROR,
                               "log_to_driver": False}
     if address is not None:
+        try:
+            check_ray_address(address)
+        except RayUnavailable as exc:
+            raise RllibUnavailable(str(exc)) from None
         try:
             with _keeping_stop_handlers():
                 ray.init(address=address, **kwargs)

@@ -24,6 +24,7 @@ import logging
 import multiprocessing
 import os
 import signal
+import socket
 import sys
 import threading
 from collections import deque
@@ -216,6 +217,47 @@ def import_ray() -> Any:
     return ray
 
 
+RAY_CONNECT_TIMEOUT_S: float = 5.0
+"""How long a Ray cluster's address may take to accept a connection [s] before it counts
+as unreachable: ``ray.init`` itself retries an address nobody answers on without end,
+logging a warning every few seconds (ray-project/ray#22413, #46863)."""
+
+RAY_ADDRESS_HINT = ("give the address `ray start --head` printed on the head node "
+                    "(HOST:PORT, port 6379 unless it was told otherwise), or \"auto\" on a "
+                    "node of the cluster")
+
+
+def check_ray_address(address: str) -> None:
+    """Raise ``RayUnavailable`` if ``address`` (``HOST:PORT`` or ``ray://HOST:PORT``)
+    cannot be connected to: a host that does not resolve, a port out of range, a refused
+    connection or none within ``RAY_CONNECT_TIMEOUT_S``. Other forms (``"auto"``, …) are
+    ``ray.init``'s to read."""
+    target = address.strip()
+    target = target[len("ray://"):] if target.startswith("ray://") else target
+    host, sep, port = target.rpartition(":")
+    host = host.removeprefix("[").removesuffix("]")  # an IPv6 literal: [::1]:6379
+    if not sep or not host or not port.isdigit():
+        return
+    if not 0 < int(port) < 65536:
+        raise RayUnavailable(f"could not connect to the Ray cluster at {address}: port "
+                             f"{int(port)} is out of range (1-65535); {RAY_ADDRESS_HINT}")
+    try:
+        with socket.create_connection((host, int(port)), timeout=RAY_CONNECT_TIMEOUT_S):
+            pass
+    except socket.gaierror:
+        reason = f"host {host!r} is not known"
+    except ConnectionRefusedError:
+        reason = f"nothing listens on port {port} of {host}"
+    except TimeoutError:
+        reason = f"{host}:{port} did not answer within {RAY_CONNECT_TIMEOUT_S:g} s"
+    except OSError as exc:
+        reason = exc.strerror or str(exc) or type(exc).__name__
+    else:
+        return
+    raise RayUnavailable(f"could not connect to the Ray cluster at {address}: {reason}; "
+                         f"{RAY_ADDRESS_HINT}")
+
+
 def _call(fn: Callable[[J], R], job: J) -> R:
     """A Ray task: the job function, the very one the local pool runs."""
     return fn(job)
@@ -226,6 +268,8 @@ def _start_ray(ray: Any, workers: int | None, address: str | None) -> bool:
     started (and so must shut down) it. An already connected Ray is used as it is."""
     if ray.is_initialized():
         return False
+    if address is not None:
+        check_ray_address(address)  # before ray.init, which retries an unreachable one forever
     kwargs: dict[str, Any] = {"include_dashboard": False, "logging_level": logging.ERROR,
                               "log_to_driver": False}
     # ray.init installs its own SIGTERM handler; ours (tfalda_sim.interrupts) must stay, so

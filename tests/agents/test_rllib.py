@@ -12,6 +12,7 @@ import json
 import math
 import os
 import shutil
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -209,6 +210,24 @@ def test_no_ray_cluster_at_the_address_is_a_clear_error(
     code, _, err = run(capsys, "train", "--backend", "rllib", "--ray-address", "auto",
                        "--out", str(tmp_path / "run"))
     assert code == 2 and "could not connect to the Ray cluster at auto" in err, err
+    assert not ray.is_initialized() and not (tmp_path / "run").exists()
+
+
+@needs_rllib
+def test_an_address_nobody_listens_on_is_a_clear_error_at_once(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """ray.init would retry it for ever; the check before it names the address and why."""
+    import ray
+
+    if ray.is_initialized():
+        pytest.skip("a Ray is connected in this process")
+    with socket.socket() as sock:  # a port nothing listens on: bound, then released
+        sock.bind(("127.0.0.1", 0))
+        address = f"127.0.0.1:{sock.getsockname()[1]}"
+    code, _, err = run(capsys, "train", "--backend", "rllib", "--ray-address", address,
+                       "--out", str(tmp_path / "run"))
+    assert code == 2, err
+    assert f"could not connect to the Ray cluster at {address}: nothing listens" in err, err
     assert not ray.is_initialized() and not (tmp_path / "run").exists()
 
 

@@ -15,6 +15,8 @@ import json
 import logging
 import operator
 import os
+import shutil
+import socket
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -25,9 +27,16 @@ from typing import Any
 import pytest
 import ray  # the ray extra: installed by `make install` and CI, so never skipped
 
+from tfalda_sim import parallel
 from tfalda_sim.cli import main
 from tfalda_sim.cli_common import SweepSpec, read_results, run_sweep
-from tfalda_sim.parallel import IN_FLIGHT_PER_WORKER, Backend, ray_stream
+from tfalda_sim.parallel import (
+    IN_FLIGHT_PER_WORKER,
+    Backend,
+    RayUnavailable,
+    check_ray_address,
+    ray_stream,
+)
 
 TIMING = {"detector_ms_median", "ms_per_frame_median", "ms_per_frame_p95", "times",
           "wall_time_s", "steps_per_s"}
@@ -152,6 +161,81 @@ def test_a_ray_cluster_that_cannot_be_reached_is_a_clear_error(tmp_path: Path) -
     assert "error: could not connect to the Ray cluster at bogus::" in proc.stderr, proc.stderr
     assert "internal error" not in proc.stderr and "Traceback" not in proc.stderr
     assert not list(tmp_path.iterdir())  # no report, no results file, no staging left
+
+
+def _closed_port() -> int:
+    """A local TCP port nothing listens on (bound, then released)."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+@pytest.mark.parametrize("address, reason", [
+    ("CLOSED", "nothing listens on port"),
+    ("no-such-host.invalid:6379", "host 'no-such-host.invalid' is not known"),  # RFC 2606
+    ("ray://no-such-host.invalid:10001", "host 'no-such-host.invalid' is not known"),
+    ("127.0.0.1:70000", "port 70000 is out of range"),
+    ("127.0.0.1:0", "port 0 is out of range"),
+])
+def test_an_address_that_cannot_be_connected_to_is_named_with_the_reason(
+        address: str, reason: str) -> None:
+    """ray.init retries such an address for ever (a wrong --ray-address hung a sweep)."""
+    address = address.replace("CLOSED", f"127.0.0.1:{_closed_port()}")
+    with pytest.raises(RayUnavailable) as err:
+        check_ray_address(address)
+    assert f"could not connect to the Ray cluster at {address}: {reason}" in str(err.value)
+    assert "ray start --head" in str(err.value)
+
+
+def test_an_address_that_does_not_answer_in_time_is_unreachable(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    def silent(*args: Any, **kwargs: Any) -> None:
+        raise TimeoutError("timed out")
+
+    monkeypatch.setattr(parallel.socket, "create_connection", silent)
+    with pytest.raises(RayUnavailable, match=r"10\.1\.2\.3:6379 did not answer within 5 s"):
+        check_ray_address("10.1.2.3:6379")
+
+
+@pytest.mark.parametrize("address", ["LISTENING", "[::1]:LISTENING6", "auto", "bogus::"])
+def test_an_address_that_answers_or_is_rays_to_read_passes(address: str) -> None:
+    """A port that accepts passes; "auto" and forms that are no HOST:PORT are left to
+    ray.init (which fails at once on them: the test above)."""
+    with contextlib.ExitStack() as stack:
+        if "LISTENING" in address:
+            six = "LISTENING6" in address
+            if six and not socket.has_ipv6:
+                pytest.skip("no IPv6 here")
+            server = stack.enter_context(socket.socket(
+                socket.AF_INET6 if six else socket.AF_INET))
+            try:
+                server.bind(("::1" if six else "127.0.0.1", 0))
+            except OSError:
+                pytest.skip("no IPv6 loopback here")
+            server.listen()
+            port = server.getsockname()[1]
+            address = f"127.0.0.1:{port}" if not six else f"[::1]:{port}"
+        check_ray_address(address)
+
+
+@pytest.mark.parametrize("command", [["stress", "--faults", "none", "--out", "out"],
+                                     ["compare", "--no-thesis", "--out", "out"]])
+def test_a_wrong_ray_address_fails_at_once_through_the_console_script(
+        command: list[str], tmp_path: Path) -> None:
+    """As a user types it: exit 2 and one line naming the address and why, no Ray
+    retrying for ever, nothing written."""
+    script = shutil.which("tfalda-sim", path=str(Path(sys.executable).parent))
+    assert script is not None, "the package is not installed (pip install -e .)"
+    address = f"127.0.0.1:{_closed_port()}"
+    env = {k: v for k, v in os.environ.items() if k not in ("TFALDA_SIM_DEBUG", "RAY_ADDRESS")}
+    proc = subprocess.run([script, *command, "--backend", "ray", "--ray-address", address,
+                           "--seeds", "0:1", "--results", "r.jsonl"], cwd=tmp_path,
+                          env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert f"error: could not connect to the Ray cluster at {address}: nothing listens" in (
+        proc.stderr), proc.stderr
+    assert "Traceback" not in proc.stderr and "internal error" not in proc.stderr
+    assert not list(tmp_path.iterdir())
 
 
 def test_a_local_ray_starts_even_where_ray_address_names_a_cluster() -> None:
