@@ -30,7 +30,8 @@ from tfalda_sim.cli_common import (
 from tfalda_sim.interrupts import holding_stops
 from tfalda_sim.perception.command import check_camera_geometry
 from tfalda_sim.perception.geometry import CameraGeometryError
-from tfalda_sim.tracks import NAMED_TRACKS, generate, load_named
+from tfalda_sim.tracks import NAMED_TRACKS
+from tfalda_sim.tracks.command import resolve_track_arg, track_file_arg
 from tfalda_sim.vehicle import MIN_CRUISE_SPEED_M_S, CarParams
 
 TOP_SPEED_M_S: float = CarParams().max_speed_m_s
@@ -56,11 +57,13 @@ def _drive_parser(sub: Any) -> None:
     dr.add_argument("--agent", choices=["pid", "ppo"], default="pid")
     dr.add_argument("--policy", type=Path, help="PPO policy .zip (default: the committed one)")
     dr.add_argument("--track", default="7",
-                    help=f"a named track ({', '.join(NAMED_TRACKS)}) or a generator seed")
+                    help=f"a named track ({', '.join(NAMED_TRACKS)}), a generator seed or a "
+                         "track file (.json, as `tfalda-sim track generate --out` writes)")
     dr.add_argument("--laps", type=positive_int_arg, default=2)
     dr.add_argument("--speed", type=speed_arg, default=1.5, help=SPEED_HELP)
     dr.add_argument("--obstacles", action="store_true",
-                    help="keep a generated track's cartons (the agents do not avoid them)")
+                    help="keep the track's cartons, a generated track's or a track file's "
+                         "(the agents do not avoid them)")
     dr.add_argument("--no-recover", action="store_true",
                     help="end the drive at the first departure (default: put the car back)")
     dr.add_argument("--video", type=Path, help="MP4 of the drive with ROIs, lanes and a map")
@@ -77,17 +80,14 @@ def cmd_drive(args: argparse.Namespace) -> int:
 
     check_outputs({"video": args.video, "camera-video": args.camera_video},
                   {"video": ".mp4", "camera-video": ".mp4"}, args.force,
-                  inputs={"policy": args.policy, "camera": camera_input(args.camera)})
+                  inputs={"policy": args.policy, "camera": camera_input(args.camera),
+                          "track": track_file_arg(args.track)})
     camera = check_camera_geometry(args.camera)
-    if args.track in NAMED_TRACKS:
-        track, label = load_named(args.track), args.track
-    elif args.track.isascii() and args.track.isdigit():
-        track, label = generate(int(args.track)), f"seed {args.track}"
-        if not args.obstacles:
-            track = replace(track, obstacles=())
-    else:
-        raise CliError(f"--track {args.track!r} is neither a named track "
-                       f"({', '.join(NAMED_TRACKS)}) nor a seed (a non-negative integer)")
+    track = resolve_track_arg(args.track)
+    label = (args.track if args.track in NAMED_TRACKS
+             else f"seed {args.track}" if args.track.isdigit() else Path(args.track).name)
+    if not args.obstacles:
+        track = replace(track, obstacles=())
     if not track.closed:
         raise CliError(f"--track {args.track} is not a loop; laps need a closed track")
     try:

@@ -20,7 +20,7 @@ import numpy as np
 from tqdm import tqdm
 
 from tfalda_sim.camera import Camera
-from tfalda_sim.envs import TfaldaTrackEnv
+from tfalda_sim.envs import StartInCarton, TfaldaTrackEnv
 from tfalda_sim.interrupts import INTERRUPTS, is_interrupt
 from tfalda_sim.tracks import Track
 from tfalda_sim.video import VideoWriter
@@ -65,6 +65,10 @@ class PpoAgent:
         return np.clip(np.asarray(action, np.float32), -1.0, 1.0)
 
 
+RECOVERY_STEP_M: float = 0.05
+"""How far along the road a recovery moves the car on while the place where it left the
+road is taken by a carton (it ran into one) [m]: it starts again just past it."""
+
 DEFAULT_POLICY = Path(__file__).resolve().parent / "policies" / "ppo.zip"
 """The committed PPO policy (see docs/agents.md for the command that trained it)."""
 
@@ -105,6 +109,23 @@ class DriveResult:
         out["lap_times_s"] = [round(t, 3) for t in self.lap_times_s]
         out["steps_per_s"] = self.steps / self.wall_time_s if self.wall_time_s > 0 else None
         return out
+
+
+def _recover(env: TfaldaTrackEnv, track: Track, s_m: float, lateral_m: float,
+             speed_m_s: float) -> Any:
+    """Put the car back on ``track`` at arc length ``s_m`` [m], ``lateral_m`` [m], heading
+    along the road, or at the first place after it, every ``RECOVERY_STEP_M``, that no
+    carton takes; the first observation there."""
+    for k in range(math.ceil(track.length_m / RECOVERY_STEP_M)):
+        start = ((s_m + k * RECOVERY_STEP_M) % track.length_m, lateral_m, 0.0)
+        try:
+            obs, _ = env.reset(options={"track": track, "speed_m_s": speed_m_s,
+                                        "start": start})
+        except StartInCarton:
+            continue
+        return obs
+    raise RuntimeError(f"no place on {track.name or 'the track'} in lane offset "
+                       f"{lateral_m} m is free of cartons")
 
 
 def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
@@ -174,8 +195,7 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
                         ended = "departure"
                         break
                     distance += info["distance_m"]
-                    obs, _ = env.reset(options={"track": track, "speed_m_s": speed_m_s,
-                                                "start": (info["s_m"], lane, 0.0)})
+                    obs = _recover(env, track, info["s_m"], lane, speed_m_s)
                     agent.reset()
         except INTERRUPTS as exc:
             if not is_interrupt(exc):

@@ -9,7 +9,13 @@ if __name__ != "tfalda_sim.envs":  # pragma: no cover - a set-up error, checked 
 
 
 from .observation import lane_vector, lane_vector_bounds, lane_vector_names
-from .tfalda_track import ObservationMode, RewardWeights, TfaldaTrackEnv, resolve_track
+from .tfalda_track import (
+    ObservationMode,
+    RewardWeights,
+    StartInCarton,
+    TfaldaTrackEnv,
+    resolve_track,
+)
 
-__all__ = ["ObservationMode", "RewardWeights", "TfaldaTrackEnv", "lane_vector",
-           "lane_vector_bounds", "lane_vector_names", "resolve_track"]
+__all__ = ["ObservationMode", "RewardWeights", "StartInCarton", "TfaldaTrackEnv",
+           "lane_vector", "lane_vector_bounds", "lane_vector_names", "resolve_track"]

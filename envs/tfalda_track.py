@@ -77,6 +77,11 @@ MAX_TRACK_SEED_HIGH: int = 2**63
 """Largest ``track_seeds`` high bound (exclusive): the seeds are drawn as int64."""
 
 
+class StartInCarton(ValueError):
+    """``reset(options={"start": ...})`` would put the car inside a carton (an obstacle):
+    choose another start (the env stays usable)."""
+
+
 class ObservationMode(Enum):
     """What ``step`` returns."""
 
@@ -428,7 +433,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         pose = self._start_pose(track, start, rng)
         self._world.reset(pose, speed)
         if self._world.collided:
-            raise ValueError(f"the start pose {start} is inside a carton; choose another")
+            raise StartInCarton(f"the start pose {start} is inside a carton; choose another")
         self._step_count = 0
         self._distance_m = 0.0
         self._roi_resets = 0

@@ -148,6 +148,12 @@ def _emit(summary: dict[str, Any], as_json: bool) -> None:
         _print_summary(summary)
 
 
+def track_file_arg(text: str) -> Path | None:
+    """The track file a ``--track`` names (``resolve_track_arg`` reads it), else None:
+    an input that no output may overwrite."""
+    return Path(text) if text.lower().endswith(".json") else None
+
+
 def resolve_track_arg(text: str) -> Track:
     """A named track, a seed (generated track) or a track file."""
     if text in NAMED_TRACKS:

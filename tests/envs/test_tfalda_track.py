@@ -13,7 +13,7 @@ from gymnasium.utils.env_checker import check_env
 
 import tfalda_sim
 from tfalda_sim.agents.oracle import OracleAgent
-from tfalda_sim.envs import TfaldaTrackEnv
+from tfalda_sim.envs import StartInCarton, TfaldaTrackEnv
 from tfalda_sim.faults import Blackout, LateralKick, MarkingGap
 from tfalda_sim.tracks import load_named
 
@@ -189,6 +189,19 @@ def test_hitting_a_carton_terminates() -> None:
             break
     assert terminated and info["collision"] and not info["off_road"] and reward < -5
     assert env.reset(seed=0)[1]["collision"] is False  # random starts avoid the cartons
+
+
+def test_a_start_inside_a_carton_is_refused_and_the_env_stays_usable() -> None:
+    """Its own error type, so that a caller (drive's recovery) can move on past it."""
+    env = TfaldaTrackEnv(track=3, obstacles=True)
+    env.reset(seed=0)
+    ob = env._world.track.obstacles[0]
+    lateral = -0.2 if ob.lane.value == "right" else 0.2
+    with pytest.raises(StartInCarton, match="inside a carton; choose another"):
+        env.reset(options={"start": (ob.s_m, lateral, 0.0)})
+    _, info = env.reset(options={"start": (ob.s_m - 1.2, lateral, 0.0)})
+    assert info["collision"] is False and abs(info["s_m"] - (ob.s_m - 1.2)) < 1e-6
+    assert not env.step(centre_steering(env))[2]
 
 
 def test_an_open_track_truncates_at_its_end() -> None:

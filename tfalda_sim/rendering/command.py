@@ -22,7 +22,7 @@ from ..cli_common import (
     seed_arg,
 )
 from ..outputs import Outputs
-from ..tracks.command import resolve_track_arg
+from ..tracks.command import resolve_track_arg, track_file_arg
 
 
 def register(sub: Any) -> None:
@@ -67,9 +67,9 @@ def cmd_render(args: argparse.Namespace) -> int:
         frame_truth,
     )
 
-    track_file = Path(args.track) if args.track.lower().endswith(".json") else None
     check_outputs({"out": args.out, "truth": args.truth}, {"out": ".png", "truth": ".png"},
-                  args.force, inputs={"track": track_file, "camera": camera_input(args.camera)})
+                  args.force,
+                  inputs={"track": track_file_arg(args.track), "camera": camera_input(args.camera)})
     camera = resolve_camera_arg(args.camera)
     track = resolve_track_arg(args.track)
     if not track.closed and not 0.0 <= args.s <= track.length_m:
