@@ -76,7 +76,7 @@ def _drive_parser(sub: Any) -> None:
 
 
 def cmd_drive(args: argparse.Namespace) -> int:
-    from .drive import drive, make_agent
+    from .drive import PolicyFileError, drive, make_agent
 
     check_outputs({"video": args.video, "camera-video": args.camera_video},
                   {"video": ".mp4", "camera-video": ".mp4"}, args.force,
@@ -101,6 +101,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
                        progress=not args.json, camera=camera)
     except CameraGeometryError as exc:
         raise CliError(f"--camera {args.camera}: {exc}") from None
+    except PolicyFileError as exc:
+        raise CliError(str(exc)) from None
     summary = result.summary() | {"agent": args.agent, "speed_m_s": args.speed,
                                   "camera": args.camera}
     if args.video:
@@ -413,7 +415,7 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
     from tfalda_sim.cli_common import SweepSpec, read_results, resume_hint, run_sweep
     from tfalda_sim.outputs import Outputs
 
-    from .drive import make_agent
+    from .drive import check_agent
     from .evaluate import (
         check_run_record,
         evaluation_jobs,
@@ -427,9 +429,9 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
     check_outputs({"out": args.out, "results": args.results},
                   {"out": ".json", "results": ".jsonl"}, args.force or args.resume,
                   inputs={"policy": args.policy, "camera": camera_input(args.camera)})
-    check_camera_geometry(args.camera)
+    camera = check_camera_geometry(args.camera)
     try:
-        make_agent(args.agent, args.policy)
+        check_agent(args.agent, args.policy, camera)
     except (ValueError, FileNotFoundError, ImportError) as exc:
         raise CliError(str(exc)) from None
     jobs = len(args.seeds) * len(args.speeds)

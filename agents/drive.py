@@ -37,6 +37,10 @@ class Agent(Protocol):
     def act(self, obs: np.ndarray) -> np.ndarray: ...
 
 
+class PolicyFileError(ValueError):
+    """A policy file that is no PPO policy the agents can drive the env with."""
+
+
 class PpoAgent:
     """A trained stable-baselines3 PPO policy (deterministic actions)."""
 
@@ -54,7 +58,27 @@ class PpoAgent:
         # One thread: a policy this small gains nothing from more, and evaluations run
         # one process per core.
         torch.set_num_threads(1)
-        self.model = PPO.load(path, device="cpu")
+        self.path = path
+        try:
+            self.model = PPO.load(path, device="cpu")
+        except (ImportError, MemoryError):
+            raise
+        except Exception as exc:  # what SB3's zip, JSON, pickle and torch readers raise
+            reason = str(exc).removeprefix("Error: ").strip() or type(exc).__name__
+            raise PolicyFileError(
+                f"{path} is not a PPO policy saved by `tfalda-sim train` ({reason}); give the "
+                ".zip a train run wrote, or leave out --policy for the committed one") from None
+
+    def check_spaces(self, observation_space: Any, action_space: Any) -> None:
+        """Raise ``PolicyFileError`` unless the policy takes observations and gives actions
+        of the env's shapes (a policy of another env, mode or version would fail at its
+        first step)."""
+        given = self.model.observation_space.shape, self.model.action_space.shape
+        if given != (observation_space.shape, action_space.shape):
+            raise PolicyFileError(
+                f"{self.path} is a policy for observations of shape {given[0]} and actions of "
+                f"shape {given[1]}; the env gives {observation_space.shape} and takes "
+                f"{action_space.shape}: give a policy `tfalda-sim train` wrote")
 
     def reset(self) -> None:
         pass
@@ -71,6 +95,18 @@ road is taken by a carton (it ran into one) [m]: it starts again just past it.""
 
 DEFAULT_POLICY = Path(__file__).resolve().parent / "policies" / "ppo.zip"
 """The committed PPO policy (see docs/agents.md for the command that trained it)."""
+
+
+def check_agent(kind: str, policy: str | Path | None = None, camera: Camera | None = None
+                ) -> None:
+    """Fail now, as ``drive`` would at its start, on an agent that cannot drive the env with
+    ``camera``: ``make_agent``'s errors, and a policy of other shapes than the env's
+    (``PolicyFileError``)."""
+    agent = make_agent(kind, policy, camera)
+    if isinstance(agent, PpoAgent):
+        env = TfaldaTrackEnv(camera=camera or "thesis")
+        agent.check_spaces(env.observation_space, env.action_space)
+        env.close()
 
 
 def make_agent(kind: str, policy: str | Path | None = None, camera: Camera | None = None
@@ -149,6 +185,8 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
     rate_hz = env.camera.frame_rate_hz
     if isinstance(agent, LanePid) and agent.camera is not env.camera:
         agent.use_camera(env.camera)  # the PID back-projects through the car's camera
+    if isinstance(agent, PpoAgent):
+        agent.check_spaces(env.observation_space, env.action_space)
     lane = -0.5 * track.lane_width_m
     start_s = track.start_line_s_m or 0.0
     steps_budget = max_steps or int(3 * laps * track.length_m / speed_m_s * rate_hz)

@@ -22,7 +22,7 @@ from tfalda_sim.cli_common import consume
 from tfalda_sim.parallel import resolve_workers, stream
 from tfalda_sim.tracks import generate
 
-from .drive import drive, make_agent
+from .drive import check_agent, drive, make_agent
 
 Job = tuple[str, str | None, int, int, float, str]
 
@@ -55,7 +55,7 @@ def iter_evaluate(kind: str, seeds: range, *, laps: int = 3,
                   workers: int = 1, camera: str = "thesis") -> Iterator[dict[str, Any]]:
     """One run per (speed, seed), streamed from ``workers`` processes in that order;
     ``camera`` a profile name or file (the workers load it)."""
-    make_agent(kind, policy, load_camera(camera))  # fail early on a bad agent or camera
+    check_agent(kind, policy, load_camera(camera))  # fail early on a bad agent or camera
     yield from stream(run_job, evaluation_jobs(kind, policy, seeds, laps, speeds, camera),
                       workers=workers)
 

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import json
+import zipfile
 from pathlib import Path
 
 import cv2
 import pytest
 
+from tfalda_sim import agents
 from tfalda_sim.cli import main
 
 
@@ -79,6 +81,48 @@ def test_bad_arguments_exit_2_naming_the_problem(capsys: pytest.CaptureFixture[s
                                                  argv: list[str], message: str) -> None:
     code, _, err = run(capsys, *argv)
     assert code == 2 and message in err
+
+
+def _policy_file(kind: str, folder: Path) -> Path:
+    """A --policy file the agents cannot drive with."""
+    path = folder / f"{kind}.zip"
+    if kind == "not-a-zip":
+        path.write_bytes(b"PK? no")
+    elif kind == "another-zip":
+        with zipfile.ZipFile(path, "w") as z:
+            z.writestr("data", '{"x": 1}')
+    elif kind == "cut-short":
+        whole = (Path(agents.__file__).parent / "policies" / "ppo.zip").read_bytes()
+        path.write_bytes(whole[:len(whole) // 2])
+    else:  # a PPO policy of another env (Pendulum: observations of 3, not the lane vector)
+        import gymnasium as gym
+        from stable_baselines3 import PPO
+
+        PPO("MlpPolicy", gym.make("Pendulum-v1"), n_steps=64, batch_size=64,
+            device="cpu").save(path)
+    return path
+
+
+@pytest.mark.parametrize("kind, message", [
+    ("not-a-zip", "is not a PPO policy saved by `tfalda-sim train` (the file"),
+    ("another-zip", "is not a PPO policy saved by `tfalda-sim train` ("),
+    ("cut-short", "is not a PPO policy saved by `tfalda-sim train` ("),
+    ("pendulum", "is a policy for observations of shape (3,) and actions of shape (1,); the "
+                 "env gives (42,)"),
+])
+@pytest.mark.parametrize("command", [["drive", "--laps", "1", "--video", "out.mp4"],
+                                     ["evaluate-agent", "--seeds", "0:1", "--out", "out.json"]])
+def test_a_policy_file_the_agents_cannot_use_is_named_with_why(
+        kind: str, message: str, command: list[str], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """Corrupt, foreign or another env's policies: exit 2 and one line, not an internal
+    error at the first step; nothing written."""
+    path = _policy_file(kind, tmp_path)
+    monkeypatch.chdir(tmp_path)
+    code, _, err = run(capsys, *command, "--agent", "ppo", "--policy", str(path))
+    assert code == 2, err
+    assert f"{path} {message}" in err, err
+    assert "internal error" not in err and not (tmp_path / command[-1]).exists()
 
 
 def test_stress_writes_json_markdown_and_png(tmp_path: Path,
