@@ -214,6 +214,10 @@ def test_camera_fit(tmp_path: Path) -> None:
     refit = tfalda("camera", "fit", frame, "--intrinsics", "car.yaml", "--out", "d.yaml",
                    "--json", cwd=tmp_path).json()
     assert abs(refit["height_m"] - doc["height_m"]) < 0.002
+    # A profile's name as --intrinsics, as the help says (it was "no such file").
+    named = tfalda("camera", "fit", frame, "--intrinsics", "reference-car", "--out", "e.yaml",
+                   "--json", cwd=tmp_path).json()
+    assert abs(named["height_m"] - doc["height_m"]) < 0.002
 
 
 @covers("camera", "show")

@@ -48,8 +48,9 @@ def register(sub: Any) -> None:
     fit.add_argument("frame", type=Path, help="the frame (PNG/JPEG, any bit depth, grey or colour)")
     lens = fit.add_mutually_exclusive_group(required=True)
     lens.add_argument("--intrinsics", type=Path,
-                      help="the camera's calibration: a profile, an OpenCV FileStorage "
-                           "YAML/XML or a ROS camera_info YAML")
+                      help="the camera's calibration: a profile (a name, e.g. reference-car, "
+                           "or a file), an OpenCV FileStorage YAML/XML or a ROS camera_info "
+                           "YAML")
     lens.add_argument("--fit-focal", action="store_true",
                       help="no calibration: fit an equidistant fisheye's focal length too")
     fit.add_argument("--lens", choices=[m.value for m in LensModel],

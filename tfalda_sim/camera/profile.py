@@ -476,9 +476,11 @@ def named_camera_path(name: str) -> Path:
 
 
 def load_intrinsics(path: str | os.PathLike[str], lens: LensModel | None = None) -> Intrinsics:
-    """The intrinsics of any camera file: a profile, an OpenCV calibration or a ROS
-    camera_info (``lens`` forces the model of an OpenCV file's coefficients)."""
-    p = Path(path)
+    """The intrinsics of a profile (a name of ``NAMED_CAMERAS`` or a file) or of any camera
+    file: an OpenCV calibration or a ROS camera_info (``lens`` forces the model of an
+    OpenCV file's coefficients)."""
+    text = os.fspath(path)
+    p = named_camera_path(text) if text in NAMED_CAMERAS else Path(text)
     kind, value = _read(p, lens)
     if kind == "profile":
         return Intrinsics(value.lens, value.K, value.D, value.width, value.height)

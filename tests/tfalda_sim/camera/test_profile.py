@@ -23,7 +23,7 @@ from tfalda_sim.camera import (
     load_intrinsics,
     save_camera,
 )
-from tfalda_sim.camera.profile import profile_dict
+from tfalda_sim.camera.profile import named_camera_path, profile_dict
 
 DATA = Path(__file__).parents[2] / "data" / "cameras"
 MOUNT = CameraMount(height_m=0.113, forward_m=0.31, lateral_m=-0.012, pitch_rad=0.1234567,
@@ -119,6 +119,15 @@ def test_opencv_filestorage_yaml_and_xml(tmp_path: Path) -> None:
     assert load_intrinsics(tmp_path / "four.yaml").lens is LensModel.FISHEYE
     four = load_intrinsics(tmp_path / "four.yaml", lens=LensModel.PINHOLE)
     assert four.lens is LensModel.PINHOLE and np.array_equal(four.D, [*pin.D[:4], 0.0])
+
+
+def test_intrinsics_of_a_profile_name_are_its_files() -> None:
+    for name in NAMED_CAMERAS:
+        by_name, by_file = load_intrinsics(name), load_intrinsics(named_camera_path(name))
+        assert by_name.lens is by_file.lens and np.array_equal(by_name.K, by_file.K)
+        assert np.array_equal(by_name.D, by_file.D)
+    with pytest.raises(CameraFileError, match="no such file"):
+        load_intrinsics("no-such-car")
 
 
 @pytest.mark.parametrize("name,lens", [("ros-plumb-bob.yaml", LensModel.PINHOLE),
