@@ -31,7 +31,7 @@ from tfalda_sim.interrupts import holding_stops
 from tfalda_sim.perception.command import check_camera_geometry
 from tfalda_sim.perception.geometry import CameraGeometryError
 from tfalda_sim.tracks import NAMED_TRACKS
-from tfalda_sim.tracks.command import resolve_track_arg, track_file_arg
+from tfalda_sim.tracks.command import resolve_track_arg, track_arg_label, track_file_arg
 from tfalda_sim.vehicle import MIN_CRUISE_SPEED_M_S, CarParams
 
 TOP_SPEED_M_S: float = CarParams().max_speed_m_s
@@ -76,6 +76,8 @@ def _drive_parser(sub: Any) -> None:
 
 
 def cmd_drive(args: argparse.Namespace) -> int:
+    from tfalda_sim.envs import StartInCarton
+
     from .drive import PolicyFileError, drive, make_agent
 
     check_outputs({"video": args.video, "camera-video": args.camera_video},
@@ -83,10 +85,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
                   inputs={"policy": args.policy, "camera": camera_input(args.camera),
                           "track": track_file_arg(args.track)})
     camera = check_camera_geometry(args.camera)
-    track = resolve_track_arg(args.track)
-    label = (args.track if args.track in NAMED_TRACKS
-             else f"seed {args.track}" if args.track.isdigit() else Path(args.track).name)
-    if not args.obstacles:
+    track, label = resolve_track_arg(args.track), track_arg_label(args.track)
+    if track.obstacles and not args.obstacles:
         track = replace(track, obstacles=())
     if not track.closed:
         raise CliError(f"--track {args.track} is not a loop; laps need a closed track")
@@ -103,6 +103,9 @@ def cmd_drive(args: argparse.Namespace) -> int:
         raise CliError(f"--camera {args.camera}: {exc}") from None
     except PolicyFileError as exc:
         raise CliError(str(exc)) from None
+    except StartInCarton as exc:  # a track file may put one on the start line
+        raise CliError(f"--track {args.track}: {exc}; leave out --obstacles or move the "
+                       "carton") from None
     summary = result.summary() | {"agent": args.agent, "speed_m_s": args.speed,
                                   "camera": args.camera}
     if args.video:

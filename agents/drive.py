@@ -61,7 +61,7 @@ class PpoAgent:
         self.path = path
         try:
             self.model = PPO.load(path, device="cpu")
-        except (ImportError, MemoryError):
+        except (ImportError, MemoryError, OSError):  # no bad file: the CLI words them
             raise
         except Exception as exc:  # what SB3's zip, JSON, pickle and torch readers raise
             reason = str(exc).removeprefix("Error: ").strip() or type(exc).__name__
@@ -104,9 +104,8 @@ def check_agent(kind: str, policy: str | Path | None = None, camera: Camera | No
     (``PolicyFileError``)."""
     agent = make_agent(kind, policy, camera)
     if isinstance(agent, PpoAgent):
-        env = TfaldaTrackEnv(camera=camera or "thesis")
-        agent.check_spaces(env.observation_space, env.action_space)
-        env.close()
+        with contextlib.closing(TfaldaTrackEnv(camera=camera or "thesis")) as env:
+            agent.check_spaces(env.observation_space, env.action_space)
 
 
 def make_agent(kind: str, policy: str | Path | None = None, camera: Camera | None = None
@@ -148,20 +147,16 @@ class DriveResult:
 
 
 def _recover(env: TfaldaTrackEnv, track: Track, s_m: float, lateral_m: float,
-             speed_m_s: float) -> Any:
+             speed_m_s: float) -> tuple[Any, dict[str, Any]]:
     """Put the car back on ``track`` at arc length ``s_m`` [m], ``lateral_m`` [m], heading
     along the road, or at the first place after it, every ``RECOVERY_STEP_M``, that no
-    carton takes; the first observation there."""
+    carton takes; the reset's observation and info there."""
     for k in range(math.ceil(track.length_m / RECOVERY_STEP_M)):
         start = ((s_m + k * RECOVERY_STEP_M) % track.length_m, lateral_m, 0.0)
-        try:
-            obs, _ = env.reset(options={"track": track, "speed_m_s": speed_m_s,
-                                        "start": start})
-        except StartInCarton:
-            continue
-        return obs
-    raise RuntimeError(f"no place on {track.name or 'the track'} in lane offset "
-                       f"{lateral_m} m is free of cartons")
+        with contextlib.suppress(StartInCarton):
+            return env.reset(options={"track": track, "speed_m_s": speed_m_s, "start": start})
+    raise StartInCarton(f"no place on {track.name or 'the track'} at lateral offset "
+                        f"{lateral_m} m is free of cartons")
 
 
 def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
@@ -232,8 +227,10 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
                     if not recover:
                         ended = "departure"
                         break
+                    obs, fresh = _recover(env, track, info["s_m"], lane, speed_m_s)
+                    # Only now: a Ctrl-C in the recovery must not count the episode twice.
                     distance += info["distance_m"]
-                    obs = _recover(env, track, info["s_m"], lane, speed_m_s)
+                    info = fresh  # the new episode's (0 m so far)
                     agent.reset()
         except INTERRUPTS as exc:
             if not is_interrupt(exc):

@@ -222,40 +222,50 @@ RAY_CONNECT_TIMEOUT_S: float = 5.0
 as unreachable: ``ray.init`` itself retries an address nobody answers on without end,
 logging a warning every few seconds (ray-project/ray#22413, #46863)."""
 
-RAY_ADDRESS_HINT = ("give the address `ray start --head` printed on the head node "
-                    "(HOST:PORT, port 6379 unless it was told otherwise), or \"auto\" on a "
-                    "node of the cluster")
+def _address_hint(client: bool) -> str:
+    """What a ``--ray-address`` of the form given should be."""
+    if client:
+        return ("give ray://HOST:PORT of the head node's Ray Client server (port 10001 "
+                "unless it was told otherwise)")
+    return ("give the address `ray start --head` printed on the head node (HOST:PORT, port "
+            "6379 unless it was told otherwise), or \"auto\" on a node of the cluster")
 
 
 def check_ray_address(address: str) -> None:
-    """Raise ``RayUnavailable`` if ``address`` (``HOST:PORT`` or ``ray://HOST:PORT``)
-    cannot be connected to: a host that does not resolve, a port out of range, a refused
-    connection or none within ``RAY_CONNECT_TIMEOUT_S``. Other forms (``"auto"``, …) are
+    """Raise ``RayUnavailable`` if ``address`` (``HOST:PORT`` or ``ray://HOST:PORT``; an
+    IPv6 host in brackets) cannot be connected to: a host name that is not one or does not
+    resolve, a port that is no number or out of range, a refused connection or none within
+    ``RAY_CONNECT_TIMEOUT_S``. Other forms (``"auto"``, a bare IPv6 address, …) are
     ``ray.init``'s to read."""
-    target = address.strip()
-    target = target[len("ray://"):] if target.startswith("ray://") else target
-    host, sep, port = target.rpartition(":")
-    host = host.removeprefix("[").removesuffix("]")  # an IPv6 literal: [::1]:6379
-    if not sep or not host or not port.isdigit():
+    client = address.startswith("ray://")
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    bracketed = host.startswith("[") and host.endswith("]")
+    host = host[1:-1] if bracketed else host
+    if not sep or not host or not port or (":" in host and not bracketed):
         return
-    if not 0 < int(port) < 65536:
-        raise RayUnavailable(f"could not connect to the Ray cluster at {address}: port "
-                             f"{int(port)} is out of range (1-65535); {RAY_ADDRESS_HINT}")
+
+    def unreachable(reason: str) -> RayUnavailable:
+        return RayUnavailable(f"could not connect to the Ray cluster at {address}: {reason}; "
+                              f"{_address_hint(client)}")
+
+    if not (port.isascii() and port.isdigit()):  # "²".isdigit() is True, int("²") fails
+        raise unreachable(f"port {port!r} is not a number")
+    if len(port) > 5 or not 0 < int(port) < 65536:
+        raise unreachable(f"port {port} is out of range (1-65535)")
     try:
         with socket.create_connection((host, int(port)), timeout=RAY_CONNECT_TIMEOUT_S):
             pass
     except socket.gaierror:
-        reason = f"host {host!r} is not known"
+        raise unreachable(f"host {host!r} is not known") from None
+    except (UnicodeError, ValueError):  # the IDNA codec: an empty or a too long label
+        raise unreachable(f"{host!r} is not a valid host name") from None
     except ConnectionRefusedError:
-        reason = f"nothing listens on port {port} of {host}"
+        raise unreachable(f"nothing listens on port {port} of {host}") from None
     except TimeoutError:
-        reason = f"{host}:{port} did not answer within {RAY_CONNECT_TIMEOUT_S:g} s"
+        raise unreachable(f"{host}:{port} did not answer within "
+                          f"{RAY_CONNECT_TIMEOUT_S:g} s") from None
     except OSError as exc:
-        reason = exc.strerror or str(exc) or type(exc).__name__
-    else:
-        return
-    raise RayUnavailable(f"could not connect to the Ray cluster at {address}: {reason}; "
-                         f"{RAY_ADDRESS_HINT}")
+        raise unreachable(exc.strerror or str(exc) or type(exc).__name__) from None
 
 
 def _call(fn: Callable[[J], R], job: J) -> R:

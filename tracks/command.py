@@ -148,20 +148,33 @@ def _emit(summary: dict[str, Any], as_json: bool) -> None:
         _print_summary(summary)
 
 
+def _is_seed(text: str) -> bool:
+    return text.isascii() and text.isdigit()  # "²".isdigit() is True, int("²") fails
+
+
 def track_file_arg(text: str) -> Path | None:
-    """The track file a ``--track`` names (``resolve_track_arg`` reads it), else None:
-    an input that no output may overwrite."""
-    return Path(text) if text.lower().endswith(".json") else None
+    """The track file a ``--track`` names (``resolve_track_arg`` reads it), else None (a
+    name, a seed or no track): an input that no output may overwrite."""
+    if text in NAMED_TRACKS or _is_seed(text):
+        return None
+    path = Path(text)
+    return path if path.suffix.lower() == ".json" else None
+
+
+def track_arg_label(text: str) -> str:
+    """How reports name the track of a ``--track``: its name, "seed N" or the file's name."""
+    path = track_file_arg(text)
+    return f"seed {text}" if _is_seed(text) else path.name if path is not None else text
 
 
 def resolve_track_arg(text: str) -> Track:
     """A named track, a seed (generated track) or a track file."""
     if text in NAMED_TRACKS:
         return load_track(named_path(text))
-    if text.isascii() and text.isdigit():  # "²".isdigit() is True, int("²") fails
+    if _is_seed(text):
         return generate(int(text))
-    path = Path(text)
-    if path.suffix.lower() == ".json":
+    path = track_file_arg(text)
+    if path is not None:
         try:
             return load_track(path)
         except TrackFileError as exc:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import zipfile
 from pathlib import Path
+from typing import Any
 
 import cv2
 import pytest
@@ -67,6 +68,41 @@ def test_drive_takes_a_track_file_as_the_track_it_holds(tmp_path: Path,
     for obstacles in (False, True):
         assert figures["6", obstacles] == figures[str(path), obstacles]
     assert figures["6", True] != figures["6", False]  # the carton is in the way
+
+
+def test_a_ctrl_c_while_the_car_is_put_back_counts_the_episode_once(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from tfalda_sim.agents import drive as driving
+    from tfalda_sim.agents.pid import LanePid
+    from tfalda_sim.tracks import generate
+
+    left_at: list[float] = []
+
+    def interrupted(env: Any, track: Any, s_m: float, *args: Any) -> None:
+        left_at.append(s_m)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(driving, "_recover", interrupted)
+    result = driving.drive(LanePid(), generate(6), laps=1)  # it runs into the carton
+    assert result.ended == "interrupted" and result.departures == 1 and len(left_at) == 1
+    assert result.distance_m == pytest.approx(left_at[0], abs=0.05)  # not twice that
+
+
+def test_a_carton_on_the_start_line_of_a_track_file_is_a_clear_error(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The rules let a track file put a carton where the drive starts; the generator never
+    does. With --obstacles: one line naming it and the fix, not an internal error."""
+    path = tmp_path / "blocked.json"
+    assert run(capsys, "track", "generate", "--seed", "6", "--out", str(path))[0] == 0
+    doc = json.loads(path.read_text())
+    doc["obstacles"][0].update(s_m=0.0, lane="right", offset_m=0.0)
+    path.write_text(json.dumps(doc))
+    code, _, err = run(capsys, "drive", "--track", str(path), "--laps", "1", "--obstacles")
+    assert code == 2, err
+    assert f"--track {path}: the start pose" in err and "inside a carton" in err, err
+    assert "leave out --obstacles" in err and "internal error" not in err
+    code, out, err = run(capsys, "drive", "--track", str(path), "--laps", "1", "--json")
+    assert code == 0 and json.loads(out)["laps_completed"] == 1, err
 
 
 @pytest.mark.parametrize("argv, message", [

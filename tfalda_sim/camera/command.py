@@ -180,8 +180,9 @@ def fit_summary(fit: MountFit) -> dict[str, Any]:
 
 def cmd_camera_fit(args: argparse.Namespace) -> int:
     overlay = args.overlay or args.out.with_name(args.out.stem + "-fit.png")
+    intrinsics = camera_input(str(args.intrinsics)) if args.intrinsics else None  # a file
     check_outputs({"out": args.out, "overlay": overlay}, {"out": ".yaml", "overlay": ".png"},
-                  args.force, inputs={"frame": args.frame, "intrinsics": args.intrinsics,
+                  args.force, inputs={"frame": args.frame, "intrinsics": intrinsics,
                                       "points": args.points})
     if args.forward_m is not None and not (math.isfinite(args.forward_m)
                                            and -1.0 <= args.forward_m <= 1.0):

@@ -475,13 +475,22 @@ def named_camera_path(name: str) -> Path:
     return PROFILES_DIR / f"{name}.yaml"
 
 
+def _profile_path(text: str) -> Path:
+    """The file of a profile name (``NAMED_CAMERAS``) or a camera file's path; a bare word
+    that names neither is an unknown profile name (``CameraFileError``)."""
+    if text in NAMED_CAMERAS:
+        return named_camera_path(text)
+    path = Path(text)
+    if os.sep not in text and "." not in text and not path.exists():
+        named_camera_path(text)  # raises: an unknown profile name
+    return path
+
+
 def load_intrinsics(path: str | os.PathLike[str], lens: LensModel | None = None) -> Intrinsics:
     """The intrinsics of a profile (a name of ``NAMED_CAMERAS`` or a file) or of any camera
     file: an OpenCV calibration or a ROS camera_info (``lens`` forces the model of an
     OpenCV file's coefficients)."""
-    text = os.fspath(path)
-    p = named_camera_path(text) if text in NAMED_CAMERAS else Path(text)
-    kind, value = _read(p, lens)
+    kind, value = _read(_profile_path(os.fspath(path)), lens)
     if kind == "profile":
         return Intrinsics(value.lens, value.K, value.D, value.width, value.height)
     return value
@@ -498,11 +507,7 @@ def load_camera(spec: str | os.PathLike[str] | Camera, *, mount: CameraMount | N
         if not isinstance(spec, (str, os.PathLike)):
             raise TypeError(f"camera must be a profile name, a path or a Camera, got "
                             f"{type(spec).__name__}")
-        text = os.fspath(spec)
-        path = named_camera_path(text) if text in NAMED_CAMERAS else Path(text)
-        bare_word = os.sep not in text and "." not in text
-        if text not in NAMED_CAMERAS and bare_word and not path.exists():
-            named_camera_path(text)  # an unknown profile name
+        path = _profile_path(os.fspath(spec))
         kind, value = _read(path, lens)
         if kind == "intrinsics":
             if mount is None:

@@ -126,7 +126,7 @@ def test_intrinsics_of_a_profile_name_are_its_files() -> None:
         by_name, by_file = load_intrinsics(name), load_intrinsics(named_camera_path(name))
         assert by_name.lens is by_file.lens and np.array_equal(by_name.K, by_file.K)
         assert np.array_equal(by_name.D, by_file.D)
-    with pytest.raises(CameraFileError, match="no such file"):
+    with pytest.raises(CameraFileError, match="unknown camera 'no-such-car'"):
         load_intrinsics("no-such-car")
 
 
