@@ -6,43 +6,29 @@ per step; on a 2-core machine two such envs ran *slower* than one (0.74×): ever
 let OpenCV start a thread per core (4 busy threads on 2 cores), and the parent spent a
 core's share on per-env pipe round trips and on merging 14 info entries per env.
 
-Here the envs are cut into one slice per core: this process steps the first slice itself
-while one worker process per further core steps each other slice (a batch: one message per
-worker and step, not per env; a parent that only waited would leave its core idle, and a
-2-env batch ran at 0.95–1.0× one env). OpenCV runs single-threaded in the workers (the
-parallelism is the processes'), observations travel through shared memory, the waits
-poll briefly before they block (``WAIT_SPIN_S``), and the parent merges the infos as
-flat columns, its own envs' while it waits for the workers (``_MergeAhead``). On x86
-the steps themselves go through shared memory too (``_Board``: actions, autoreset flags,
-rewards, flags and the infos' numbers, handed over by a step number each side polls): a
-pipe message cost ≈ 15 µs of system calls and wake-up here,
-four per step and worker; the pipes carry everything else (resets, calls, errors, infos
-the board cannot hold). Everything else is Gymnasium's semantics: ``AutoresetMode.NEXT_STEP`` (or
-``SAME_STEP``, as SB3 needs), seeds ``seed + i`` for env ``i``, the infos of
-``SyncVectorEnv`` (``key`` and ``_key`` arrays); a rollout equals ``SyncVectorEnv``'s bit
-for bit. With one env, or one CPU, every env runs in this process.
+Here the envs are cut into one slot per core: this process steps the first slot itself
+while one worker process per further core steps each other slot (a batch: one message per
+worker and step, not per env; a parent that only waited would leave its core idle). The
+runtime (worker processes, the shared step board, the waits) is ``envs.workers``; this
+module keeps Gymnasium's semantics: ``AutoresetMode.NEXT_STEP`` (or ``SAME_STEP``, as SB3
+needs), seeds ``seed + i`` for env ``i``, the infos of ``SyncVectorEnv`` (``key`` and
+``_key`` arrays, merged as flat columns, this process's envs' while it waits for the
+workers: ``_MergeAhead``); a rollout equals ``SyncVectorEnv``'s bit for bit. With one
+env, or one CPU, every env runs in this process.
 
-Workers ignore Ctrl-C (the parent closes them) and die with the parent (Linux
-``PR_SET_PDEATHSIG``), like the sweep workers of ``tfalda_sim.parallel``.
+It works from any script: a worker never re-runs the user's main module (no
+``if __name__ == "__main__":`` guard needed; ``envs.workers.start_worker``).
 """
 
 from __future__ import annotations
 
 import contextlib
-import ctypes
-import functools
 import multiprocessing
 import os
-import platform
-import signal
-import sys
-import time
-import traceback
 from collections.abc import Callable, Sequence
 from multiprocessing.connection import Connection
 from typing import Any, ClassVar
 
-import cv2
 import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
@@ -55,38 +41,26 @@ from gymnasium.vector.utils import (
 from tfalda_sim import ENV_ID, MAX_EPISODE_STEPS
 from tfalda_sim.parallel import available_cpus
 
-_PR_SET_PDEATHSIG = 1  # linux/prctl.h
-
-WAIT_SPIN_S = 0.002
-"""How long [s] a worker polls for its next command (and this process for the workers'
-answers to other commands than steps: it spins for a step's, the workers are stepping)
-before blocking. The wait between two steps is this process's own env step plus
-its overhead (≈ 1.5–2.5 ms); a process that blocks instead lets its core sleep, and on this
-VM a woken core then stepped ≈ 30 % slower (cold caches) — 740 vs 810 steps/s with 2 envs.
-Past the spin it blocks, so a long pause (a PPO update) costs ≤ 2 ms of a core per step."""
-
-BOARD_NAP_S = 0.05
-"""A worker idle past ``WAIT_SPIN_S`` sleeps on its pipe for at most this long [s] before
-it looks at the step board again (a wake-up message ends the nap at once; the rare one
-missed costs at most this)."""
-
-_WAKE = ("wake", None)
-"""The message that wakes a worker sleeping on its pipe (a step is on the board)."""
-
-BOARD_INFO_SLOTS = 32
-"""Numbers per env's info the shared step board holds (floats and ints each): an info
-with more goes through the pipe."""
-
-FAST_STEPS = platform.machine().lower() in ("x86_64", "amd64", "x86", "i386", "i686")
-"""Whether steps go through the shared step board (``_Board``) instead of the pipes: its
-hand-over (write the data, then the sequence number; read the number, then the data)
-needs stores seen by the other core in program order, which x86 guarantees (TSO) and
-weaker memory models (ARM, POWER) do not without fences Python cannot issue; there the
-pipes carry every step."""
-
-_ERRORS: dict[str, type[Exception]] = {e.__name__: e for e in (
-    ValueError, TypeError, RuntimeError, KeyError, AttributeError, NotImplementedError)}
-"""Exceptions a worker's env may raise that the parent raises again as the same type."""
+from .workers import (
+    FAST_STEPS,
+    RAISED_AS_IS,
+    SCALAR_TYPES,
+    WAIT_SPIN_S,
+    WAKE,
+    Board,
+    SpareTime,
+    WorkerProcess,
+    await_results,
+    call_envs,
+    info_layout,
+    read_results,
+    receive,
+    reset_envs,
+    set_attrs,
+    start_worker,
+    step_envs,
+    wrapped_in,
+)
 
 
 class TfaldaTrackVectorEnv(VectorEnv):
@@ -134,23 +108,23 @@ class TfaldaTrackVectorEnv(VectorEnv):
                          "autoreset_mode": mode}
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        lanes = min(self.num_envs, workers if workers is not None else available_cpus())
-        # Contiguous slices: lane w steps envs slices[w]:slices[w + 1]; lane 0 is this
-        # process (it would otherwise sit idle while the workers step), lanes 1… are workers.
-        self._slices = np.linspace(0, self.num_envs, lanes + 1).round().astype(int)
+        slots = min(self.num_envs, workers if workers is not None else available_cpus())
+        # Contiguous slices: slot w steps envs slices[w]:slices[w + 1]; slot 0 is this
+        # process (it would otherwise sit idle while the workers step), slots 1… are workers.
+        self._slices = np.linspace(0, self.num_envs, slots + 1).round().astype(int)
         self._conns: list[Connection] = []
-        self._procs: list[multiprocessing.process.BaseProcess] = []
+        self._workers: list[WorkerProcess] = []
         self._autoreset = np.zeros(self.num_envs, dtype=np.bool_)
-        self._board: _Board | None = None  # the shared step board (workers, x86 only)
+        self._board: Board | None = None  # the shared step board (workers, x86 only)
         self._seq = 0  # the last step posted on it
-        self._known: list[tuple | None] = [None] * self.num_envs  # info layouts (_layout)
+        self._known: list[tuple | None] = [None] * self.num_envs  # info layouts (info_layout)
         self._piped = 0  # posted steps whose results a worker sent through its pipe
         self._pending: set[int] = set()  # workers whose answer to step _seq is not read
         self._layouts = [0] * (self.num_envs + 1)  # per worker, layouts learnt from it
         self.closed = False
         self._local: list[gym.Env] = [probe] + [
             gym.make(ENV_ID, **self._kwargs) for _ in range(1, int(self._slices[1]))]
-        if lanes == 1:
+        if slots == 1:
             self._observations = self.observation_space.sample()  # batch buffer, overwritten
             return
         # spawn, not fork: a fork copies OpenCV's thread pool mid-state (a worker then hung
@@ -160,41 +134,45 @@ class TfaldaTrackVectorEnv(VectorEnv):
         self._observations = read_from_shared_memory(self.single_observation_space,
                                                       self._shm, self.num_envs)
         if FAST_STEPS and isinstance(self.single_action_space, gym.spaces.Box):
-            self._board = _Board(ctx, self.num_envs, self.single_action_space.shape, lanes)
-            self._idle = _Idle(self._board, 0, self._local)
-        for w in range(1, lanes):
+            self._board = Board(ctx, self.num_envs, self.single_action_space.shape, slots)
+            self._idle = SpareTime(self._board, 0, self._local)
+        for w in range(1, slots):
             parent, child = ctx.Pipe()
-            proc = ctx.Process(target=_worker, name=f"tfalda-vec-{w}", daemon=True, args=(
-                child, self._shm, self.single_observation_space, self.num_envs,
-                self._kwargs, int(self._slices[w]), int(self._slices[w + 1]), os.getpid(),
-                self._board, w))
-            proc.start()
+            try:
+                worker = start_worker(ctx, f"tfalda-vec-{w}", (
+                    child, self._shm, self.single_observation_space, self.num_envs, ENV_ID,
+                    self._kwargs, int(self._slices[w]), int(self._slices[w + 1]),
+                    os.getpid(), self._board, w))
+            except BaseException:
+                parent.close()
+                child.close()
+                self.close()
+                raise
             child.close()
             self._conns.append(parent)
-            self._procs.append(proc)
+            self._workers.append(worker)
         self._gather("init")
 
     # ------------------------------------------------------------------ protocol
-    def _run(self, command: str, per_lane: Sequence[Any],
+    def _run(self, command: str, per_slot: Sequence[Any],
              local: Callable[[Any], list[Any]]) -> list[Any]:
-        """``command`` on every lane, in env order: the workers get ``per_lane[1:]`` first,
-        this process runs ``local(per_lane[0])`` meanwhile. Whatever happens here (an
+        """``command`` on every slot, in env order: the workers get ``per_slot[1:]`` first,
+        this process runs ``local(per_slot[0])`` meanwhile. Whatever happens here (an
         error, a Ctrl-C in this process's own envs, a value that does not pickle), every
         worker that got the command is heard before it is raised: the pipes stay in
         step."""
         sent = 0
         try:
-            for w, (conn, data) in enumerate(zip(self._conns, per_lane[1:], strict=True)):
+            for w, (conn, data) in enumerate(zip(self._conns, per_slot[1:], strict=True)):
                 try:
                     conn.send((command, data))
                 except (BrokenPipeError, ConnectionError, OSError):
-                    code = self._procs[w].exitcode
+                    death = self._workers[w].death()
                     self.close()
-                    raise RuntimeError(f"worker {w + 1} of the vector env died (exit code "
-                                       f"{code}); make a new one with gymnasium.make_vec"
-                                       ) from None
+                    raise RuntimeError(f"worker {w + 1} of the vector env died ({death}); "
+                                       "make a new one with gymnasium.make_vec") from None
                 sent += 1
-            answers = local(per_lane[0])
+            answers = local(per_slot[0])
         except BaseException:
             self._drain(sent)
             raise
@@ -208,14 +186,14 @@ class TfaldaTrackVectorEnv(VectorEnv):
             with contextlib.suppress(EOFError, ConnectionError, OSError):
                 self._answer(w)
 
-    def _answer(self, lane: int) -> tuple[bool, Any]:
-        """Worker ``lane``'s answer ``(ok, data)`` to a pipe command. Answers to posted
+    def _answer(self, slot: int) -> tuple[bool, Any]:
+        """Worker ``slot``'s answer ``(ok, data)`` to a pipe command. Answers to posted
         steps this process gave up on (a Ctrl-C while it waited) may come first: skipped,
         their info layouts learnt (the worker learnt them as it sent them)."""
-        message = _receive(self._conns[lane - 1], WAIT_SPIN_S)
+        message = receive(self._conns[slot - 1], WAIT_SPIN_S)
         while len(message) == 3:
-            self._learn(lane, message)
-            message = _receive(self._conns[lane - 1], WAIT_SPIN_S)
+            self._learn(slot, message)
+            message = receive(self._conns[slot - 1], WAIT_SPIN_S)
         return message
 
     def _gather(self, command: str) -> list[Any]:
@@ -227,7 +205,7 @@ class TfaldaTrackVectorEnv(VectorEnv):
                 ok, data = self._answer(w + 1)
             except (EOFError, ConnectionError):
                 ok, data = False, ("RuntimeError", f"worker {w + 1} of the vector env died "
-                                   f"(exit code {self._procs[w].exitcode})", "")
+                                   f"({self._workers[w].death()})", "")
             if ok:
                 answers.append(data)
             elif error is None:
@@ -240,10 +218,10 @@ class TfaldaTrackVectorEnv(VectorEnv):
         """Raise a worker's error here: as the same type if it is one an env may raise,
         else (or during set-up) as a RuntimeError after closing the vector env."""
         name, message, trace = error
-        if command == "init" or name not in _ERRORS:
+        if command == "init" or name not in RAISED_AS_IS:
             self.close()
             raise RuntimeError(f"{name} in a worker of the vector env: {message}\n{trace}")
-        raise _ERRORS[name](message)
+        raise RAISED_AS_IS[name](message)
 
     def _step_posted(self, acts: np.ndarray, same_step: bool, merge: bool
                      ) -> tuple[list[tuple[float, bool, bool, dict[str, Any]]],
@@ -269,10 +247,10 @@ class TfaldaTrackVectorEnv(VectorEnv):
         for w, conn in enumerate(self._conns, start=1):
             if board.ctrl[board.asleep + w]:  # past its spin: blocked on its pipe
                 with contextlib.suppress(OSError):
-                    conn.send(_WAKE)
+                    conn.send(WAKE)
         try:
             try:
-                answers = _step_envs(self._local, self.single_observation_space,
+                answers = step_envs(self._local, self.single_observation_space,
                                      self._observations, 0, acts[:n0], self._autoreset[:n0],
                                      same_step, self._idle.mark)
             finally:  # also after an error: a worker preparing meanwhile stops
@@ -291,11 +269,11 @@ class TfaldaTrackVectorEnv(VectorEnv):
             ahead = None
         return answers, None if ahead is None else ahead.merged
 
-    def _collect(self, idle: _Idle | None = None
+    def _collect(self, idle: SpareTime | None = None
                  ) -> list[list[tuple[float, bool, bool, dict[str, Any]]]]:
         """The results of the step last posted of every worker not heard yet (all of
         them, but after a Ctrl-C), in worker order; a worker's error raised after all
-        have answered. ``idle``: what this process does while it waits (``_Idle``)."""
+        have answered. ``idle``: what this process does while it waits (``SpareTime``)."""
         board = self._board
         assert board is not None
         parts, error = [], None
@@ -303,16 +281,16 @@ class TfaldaTrackVectorEnv(VectorEnv):
             conn = self._conns[w - 1]
             start, stop = int(self._slices[w]), int(self._slices[w + 1])
             try:
-                message = _await_answer(conn, board, w, self._seq, idle)
+                message = await_results(conn, board, w, self._seq, idle)
                 # Pipe messages to other commands or steps than this one are answers this
                 # process gave up on (a Ctrl-C while it waited): dropped, but the layouts
                 # a worker sent are learnt (it learnt them as it sent them).
                 while message is not None and (len(message) != 3 or message[2] != self._seq):
                     self._learn(w, message)
-                    message = _await_answer(conn, board, w, self._seq)
+                    message = await_results(conn, board, w, self._seq)
             except (EOFError, ConnectionError):
-                message = (False, ("RuntimeError", f"worker {w} of the vector env died (exit "
-                                   f"code {self._procs[w - 1].exitcode})", ""), self._seq)
+                message = (False, ("RuntimeError", f"worker {w} of the vector env died "
+                                   f"({self._workers[w - 1].death()})", ""), self._seq)
             self._pending.discard(w)
             if message is None:
                 if board.ctrl[board.layouts + w] != self._layouts[w]:
@@ -322,7 +300,7 @@ class TfaldaTrackVectorEnv(VectorEnv):
                     raise RuntimeError(
                         f"the vector env lost worker {w}'s info layout (a Ctrl-C while it "
                         "read one); make a new one with gymnasium.make_vec")
-                parts.append(_read_results(board, start, stop, self._known))
+                parts.append(read_results(board, start, stop, self._known))
                 continue
             ok, data, _ = message
             if ok:
@@ -335,16 +313,16 @@ class TfaldaTrackVectorEnv(VectorEnv):
             self._raise("step", error)
         return parts
 
-    def _learn(self, lane: int, message: tuple) -> None:
-        """The info layouts of worker ``lane``'s envs from its pipe answer to a posted
+    def _learn(self, slot: int, message: tuple) -> None:
+        """The info layouts of worker ``slot``'s envs from its pipe answer to a posted
         step (the worker learnt them as it sent it, and counts them: ``_layouts``);
         other messages teach nothing."""
         if len(message) == 3 and message[2] == self._seq:
-            self._pending.discard(lane)  # the answer to the step last posted: heard
+            self._pending.discard(slot)  # the answer to the step last posted: heard
         if len(message) == 3 and message[0]:
-            start, stop = int(self._slices[lane]), int(self._slices[lane + 1])
-            self._known[start:stop] = [_layout(answer[3]) for answer in message[1]]
-            self._layouts[lane] += 1
+            start, stop = int(self._slices[slot]), int(self._slices[slot + 1])
+            self._known[start:stop] = [info_layout(answer[3]) for answer in message[1]]
+            self._layouts[slot] += 1
 
     def _indices(self, indices: Sequence[int]) -> list[int]:
         """``indices`` as a list of env numbers, each checked to be one of ours."""
@@ -353,7 +331,7 @@ class TfaldaTrackVectorEnv(VectorEnv):
             raise ValueError(f"indices must lie in [0, {self.num_envs}), got {indices!r}")
         return chosen
 
-    def _per_lane(self, values: Sequence[Any]) -> list[Sequence[Any]]:
+    def _per_slot(self, values: Sequence[Any]) -> list[Sequence[Any]]:
         s = self._slices
         return [values[s[w]:s[w + 1]] for w in range(len(s) - 1)]
 
@@ -374,9 +352,9 @@ class TfaldaTrackVectorEnv(VectorEnv):
         space, buffer = self.single_observation_space, self._observations
 
         def local(chunk: Sequence[int | None]) -> list[dict[str, Any]]:
-            return _reset_envs(self._local, space, buffer, 0, chunk, options)
+            return reset_envs(self._local, space, buffer, 0, chunk, options)
 
-        infos = self._run("reset", [(chunk, options) for chunk in self._per_lane(seeds)],
+        infos = self._run("reset", [(chunk, options) for chunk in self._per_slot(seeds)],
                           lambda data: local(data[0]))
         return _copy(self._observations), _merge_infos(infos)
 
@@ -413,8 +391,8 @@ class TfaldaTrackVectorEnv(VectorEnv):
         else:  # no board, or actions the envs will refuse (with their own message)
             results = self._run(
                 "step", [(a, r, same_step) for a, r in zip(
-                    self._per_lane(acts), self._per_lane(self._autoreset), strict=True)],
-                lambda data: _step_envs(self._local, space, buffer, 0, *data))
+                    self._per_slot(acts), self._per_slot(self._autoreset), strict=True)],
+                lambda data: step_envs(self._local, space, buffer, 0, *data))
             merged = None
         rewards = np.array([r[0] for r in results], dtype=np.float64)
         terminated = np.array([r[1] for r in results], dtype=np.bool_)
@@ -446,8 +424,8 @@ class TfaldaTrackVectorEnv(VectorEnv):
         mask = np.zeros(self.num_envs, np.bool_)
         mask[chosen] = True
         answers = self._run("call", [(name, args, kwargs, m, invoke)
-                                     for m in self._per_lane(mask)],
-                            lambda data: _call_envs(self._local, *data))
+                                     for m in self._per_slot(mask)],
+                            lambda data: call_envs(self._local, *data))
         return tuple(answers[i] for i in chosen)
 
     def get_attr(self, name: str) -> tuple[Any, ...]:
@@ -470,14 +448,14 @@ class TfaldaTrackVectorEnv(VectorEnv):
         for i, value in zip(chosen, values, strict=True):
             per_env[i], mask[i] = value, True
         self._run("set", [(name, v, m) for v, m in zip(
-            self._per_lane(per_env), self._per_lane(mask), strict=True)],
-                  lambda data: _set(self._local, *data))
+            self._per_slot(per_env), self._per_slot(mask), strict=True)],
+                  lambda data: set_attrs(self._local, *data))
 
     def is_wrapped(self, wrapper: type[gym.Wrapper]) -> tuple[bool, ...]:
         """Whether each env is wrapped in ``wrapper`` (anywhere in its wrapper chain)."""
         self._check_open()
         return tuple(self._run("wrapped", [wrapper] * (len(self._slices) - 1),
-                               lambda cls: [_wrapped(env, cls) for env in self._local]))
+                               lambda cls: [wrapped_in(env, cls) for env in self._local]))
 
     def render(self) -> tuple[Any, ...] | None:
         return self.call("render")
@@ -489,14 +467,15 @@ class TfaldaTrackVectorEnv(VectorEnv):
         for conn in self._conns:
             with contextlib.suppress(OSError, BrokenPipeError):
                 conn.send(("close", None))
-        for proc in self._procs:
+        for worker in self._workers:
+            proc = worker.process
             proc.join(timeout=5.0)
             if proc.is_alive():
                 proc.terminate()
                 proc.join(timeout=5.0)
         for conn in self._conns:
             conn.close()
-        self._conns, self._procs = [], []
+        self._conns, self._workers = [], []
 
     def close(self, **kwargs: Any) -> None:
         if self.closed:
@@ -521,16 +500,6 @@ def make_vector_env(num_envs: int = 1, **kwargs: Any) -> TfaldaTrackVectorEnv:
     return TfaldaTrackVectorEnv(num_envs, **kwargs)
 
 
-# ---------------------------------------------------------------------- shared pieces
-def _write(space: gym.Space, buffer: Any, index: int, obs: Any) -> None:
-    """Env ``index``'s observation into the batch ``buffer`` (arrays or a dict of them)."""
-    if isinstance(space, gym.spaces.Dict):
-        for key, sub in space.spaces.items():
-            _write(sub, buffer[key], index, obs[key])
-    else:
-        buffer[index] = obs
-
-
 def _copy(batch: Any) -> Any:
     """A copy of the batch buffer (the next step overwrites it), as Gymnasium's vector
     envs return by default."""
@@ -538,84 +507,6 @@ def _copy(batch: Any) -> Any:
         return {key: _copy(value) for key, value in batch.items()}
     return batch.copy()
 
-
-def _step_envs(envs: list[gym.Env], space: gym.Space, buffer: Any, start: int,
-               actions: np.ndarray, autoreset: np.ndarray, same_step: bool,
-               on_reset: Callable[[], None] | None = None
-               ) -> list[tuple[float, bool, bool, dict[str, Any]]]:
-    """``envs`` (envs ``start``… of the batch) stepped, their observations in ``buffer``;
-    ``on_reset()`` before any of them resets."""
-    return [_step_one(env, space, buffer, start + i, actions[i], bool(autoreset[i]), same_step,
-                      on_reset) for i, env in enumerate(envs)]
-
-
-def _reset_envs(envs: list[gym.Env], space: gym.Space, buffer: Any, start: int,
-                seeds: Sequence[int | None], options: dict[str, Any] | None
-                ) -> list[dict[str, Any]]:
-    """``envs`` (envs ``start``… of the batch) reset, their observations in ``buffer``."""
-    infos = []
-    for i, (env, seed) in enumerate(zip(envs, seeds, strict=True)):
-        obs, info = env.reset(seed=seed, options=options)
-        _write(space, buffer, start + i, obs)
-        infos.append(info)
-    return infos
-
-
-def _step_one(env: gym.Env, space: gym.Space, buffer: Any, index: int, action: np.ndarray,
-              autoreset: bool, same_step: bool = False,
-              on_reset: Callable[[], None] | None = None
-              ) -> tuple[float, bool, bool, dict[str, Any]]:
-    """One env's step, its observation written to ``buffer``. NEXT_STEP autoreset: a
-    step with ``autoreset`` resets instead; SAME_STEP (``same_step``): an episode's last
-    step resets at once, the info being ``SyncVectorEnv``'s (``final_obs``,
-    ``final_info``, then the reset's info). ``on_reset()`` just before a reset."""
-    if autoreset:
-        if on_reset is not None:
-            on_reset()
-        obs, info = env.reset()
-        reward, terminated, truncated = 0.0, False, False
-    else:
-        obs, reward, terminated, truncated, info = env.step(action)
-        if same_step and (terminated or truncated):
-            final_obs, final_info = obs, info
-            if on_reset is not None:
-                on_reset()
-            obs, info = env.reset()
-            info = {"final_obs": final_obs, "final_info": final_info, **info}
-    _write(space, buffer, index, obs)
-    return float(reward), bool(terminated), bool(truncated), info
-
-
-def _call(env: gym.Env, name: str, args: tuple, kwargs: dict[str, Any]) -> Any:
-    attr = env.get_wrapper_attr(name)
-    return attr(*args, **kwargs) if callable(attr) else attr
-
-
-def _call_envs(envs: list[gym.Env], name: str, args: tuple, kwargs: dict[str, Any],
-               mask: np.ndarray, invoke: bool) -> list[Any]:
-    """``_call`` on the envs marked in ``mask`` (None for the others); without
-    ``invoke`` the attribute itself."""
-    return [(_call(env, name, args, kwargs) if invoke else env.get_wrapper_attr(name))
-            if chosen else None for env, chosen in zip(envs, mask, strict=True)]
-
-
-def _set(envs: list[gym.Env], name: str, values: Sequence[Any], mask: np.ndarray
-         ) -> list[None]:
-    for env, value, chosen in zip(envs, values, mask, strict=True):
-        if chosen:
-            env.set_wrapper_attr(name, value)
-    return [None] * len(envs)
-
-
-def _wrapped(env: gym.Env, wrapper: type[gym.Wrapper]) -> bool:
-    while isinstance(env, gym.Wrapper):
-        if isinstance(env, wrapper):
-            return True
-        env = env.env
-    return False
-
-
-_SCALARS = (float, int, bool)
 
 _plans: dict[tuple, Any] = {}
 """``_MergeAhead``'s plans by (keys, their types): the merged dict's names in order
@@ -641,7 +532,7 @@ class _MergeAhead:
     """``_merge_infos``' result for infos of one layout, made before the infos are all
     known: ``of`` makes the merged dict with its arrays, ``fill`` writes env ``i``'s values
     into them. So the vector env merges this process's envs' infos while it waits for the
-    workers, and only theirs after (≈ 45 µs a step off the path both lanes wait on).
+    workers, and only theirs after (≈ 45 µs a step off the path both slots wait on).
 
     The layout (a plan per keys and their types): one array per numeric type, a row per
     key (each row as ``np.array(values, dtype=type)`` makes it; the rows are views of that
@@ -654,7 +545,7 @@ class _MergeAhead:
         names, columns, row_of, strings = plan
         self.keys, self.kinds, self.plan = keys, kinds, plan
         self.blocks = [np.empty((len(cols), n), dtype=kind)
-                       for kind, cols in zip(_SCALARS, columns, strict=True)]
+                       for kind, cols in zip(SCALAR_TYPES, columns, strict=True)]
         block_rows: list[Any] = [row for block in self.blocks for row in block]  # views
         values: list[Any] = [None] * len(names)
         values[0::2] = [block_rows[i] for i in row_of]  # a string's row −1: replaced below
@@ -675,9 +566,9 @@ class _MergeAhead:
         plan = _plans.get(key := (keys, kinds))
         if plan is None:
             plan = False
-            if all(k in _SCALARS or k is str for k in kinds):
+            if all(k in SCALAR_TYPES or k is str for k in kinds):
                 columns = tuple([j for j, k in enumerate(kinds) if k is kind]
-                                for kind in _SCALARS)
+                                for kind in SCALAR_TYPES)
                 numeric = [j for cols in columns for j in cols]  # the blocks' rows, in order
                 row_of = [numeric.index(j) if k is not str else -1
                           for j, k in enumerate(kinds)]
@@ -753,308 +644,3 @@ def _merge_infos(infos: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 _MISSING = object()
-
-
-class _Board:
-    """Shared memory through which this process posts steps to the workers and they post
-    their results back: a pipe message costs ≈ 15 µs of system calls and wake-up on this
-    VM, and a step through the pipes took four (≈ 0.12 ms of a 1.4 ms step of two envs).
-    ``ctrl``: the number of the step posted, its SAME_STEP flag, then per worker the
-    number of the last step whose results it wrote, whether it sleeps on its pipe (past
-    its spin: the parent wakes it with a message) and how many info layouts it sent
-    through the pipe (the parent checks it learnt as many); per lane (this process's
-    first) the number of the last step in which one of its envs reset (it says so as
-    the reset begins: the other lanes, done with their step, prepare their next resets
-    meanwhile, ``_Idle``) and the number of the last step it took (results on the board
-    or in the pipe: the others' preparation ends). Per env: its action, its autoreset
-    flag, reward, terminated and truncated, and its info's floats and ints (in the order
-    of its keys; the keys, types and strings are its layout, ``_layout``, which both sides
-    learn from the infos that went through the pipe)."""
-
-    def __init__(self, ctx: Any, num_envs: int, action_shape: tuple[int, ...],
-                 lanes: int) -> None:
-        size = int(np.prod(action_shape, dtype=np.int64))
-        self.asleep = lanes  # ctrl[asleep + w]: worker w blocks on its pipe (wake it)
-        self.layouts = 2 * lanes  # ctrl[layouts + w]: layouts worker w sent by pipe
-        self.lanes = lanes
-        self.resetting = 3 * lanes  # ctrl[resetting + l]: the last step lane l reset in
-        self.finished = 4 * lanes  # ctrl[finished + l]: the last step lane l took
-        self._raw = (ctx.RawArray(ctypes.c_int64, 5 * lanes),
-                     ctx.RawArray(ctypes.c_double, num_envs * size),
-                     ctx.RawArray(ctypes.c_uint8, num_envs),
-                     ctx.RawArray(ctypes.c_double, num_envs),
-                     ctx.RawArray(ctypes.c_uint8, 2 * num_envs),
-                     ctx.RawArray(ctypes.c_double, num_envs * BOARD_INFO_SLOTS),
-                     ctx.RawArray(ctypes.c_int64, num_envs * BOARD_INFO_SLOTS))
-        self._shape = (num_envs, *action_shape)
-        self._views()
-
-    def _views(self) -> None:
-        ctrl, actions, autoreset, rewards, flags, floats, ints = self._raw
-        n = self._shape[0]
-        self.ctrl = np.frombuffer(ctrl, np.int64)
-        self.actions = np.frombuffer(actions, np.float64).reshape(self._shape)
-        self.autoreset = np.frombuffer(autoreset, np.uint8)
-        self.rewards = np.frombuffer(rewards, np.float64)
-        self.flags = np.frombuffer(flags, np.uint8).reshape(n, 2)
-        self.floats = np.frombuffer(floats, np.float64).reshape(n, BOARD_INFO_SLOTS)
-        self.ints = np.frombuffer(ints, np.int64).reshape(n, BOARD_INFO_SLOTS)
-
-    def __getstate__(self) -> dict[str, Any]:  # to a spawned worker: the shared memory
-        return {"_raw": self._raw, "_shape": self._shape, "asleep": self.asleep,
-                "layouts": self.layouts, "resetting": self.resetting,
-                "finished": self.finished, "lanes": self.lanes}
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__dict__.update(state)
-        self._views()
-
-
-def _layout(info: dict[str, Any]) -> tuple | None:
-    """What the board needs to know of an info to carry it as numbers: its keys, their
-    types and its strings (None: it cannot, e.g. an array in it or too many numbers)."""
-    kinds = tuple(map(type, info.values()))
-    n_float = kinds.count(float)
-    if n_float > BOARD_INFO_SLOTS or len(kinds) - n_float - kinds.count(str) > (
-            BOARD_INFO_SLOTS) or not all(k in _SCALARS or k is str for k in kinds):
-        return None
-    return tuple(info), kinds, tuple(v for v in info.values() if type(v) is str)
-
-
-def _post_results(board: _Board, start: int,
-                  answers: list[tuple[float, bool, bool, dict[str, Any]]],
-                  known: list[tuple | None]) -> bool:
-    """Write a worker's step results (envs ``start``…) to the board if every info has
-    the layout its env had last (``known``); False (nothing meant) otherwise."""
-    for answer, layout in zip(answers, known, strict=True):
-        if layout is None or _layout(answer[3]) != layout:
-            return False
-    for i, (reward, terminated, truncated, info) in enumerate(answers):
-        k = start + i
-        board.rewards[k] = reward
-        board.flags[k] = terminated, truncated
-        values = info.values()
-        floats = [v for v in values if type(v) is float]
-        ints = [v for v in values if type(v) is int or type(v) is bool]
-        board.floats[k, :len(floats)] = floats
-        try:
-            board.ints[k, :len(ints)] = ints
-        except OverflowError:  # an int beyond int64: the pipe carries it
-            return False
-    return True
-
-
-def _read_results(board: _Board, start: int, stop: int, known: list[tuple | None]
-                  ) -> list[tuple[float, bool, bool, dict[str, Any]]]:
-    """The step results of envs ``start:stop`` from the board, as the worker made them."""
-    out = []
-    rewards = board.rewards[start:stop].tolist()
-    flags = board.flags[start:stop].tolist()
-    for i, k in enumerate(range(start, stop)):
-        keys, kinds, strings = known[k]  # type: ignore[misc]
-        floats = iter(board.floats[k].tolist())
-        ints = iter(board.ints[k].tolist())
-        texts = iter(strings)
-        info = {key: (next(floats) if kind is float else next(texts) if kind is str
-                      else bool(next(ints)) if kind is bool else next(ints))
-                for key, kind in zip(keys, kinds, strict=True)}
-        out.append((rewards[i], bool(flags[i][0]), bool(flags[i][1]), info))
-    return out
-
-
-def _prepare_resets(envs: list[gym.Env], stop: Callable[[], bool] | None = None) -> None:
-    """``prepare_reset`` on each env (a lane with time to spare: while another lane
-    resets, it generates its envs' next tracks, builds their scenes and paints their
-    first frames, ≈ 1.5 ms of each of their resets, so that the others wait less on them)
-    until ``stop()`` says the spare time is over (the other lanes are done: going on would
-    make them wait); never fails the lane (a reset that would fail still fails, then, as
-    it would have)."""
-    for env in envs:
-        if stop is not None and stop():
-            return
-        with contextlib.suppress(Exception):
-            env.unwrapped.prepare_reset(stop)  # type: ignore[attr-defined]
-
-
-class _Idle:
-    """What a lane does with its time to spare in a step (this process while it waits for
-    the workers, a worker while it waits for the next step): if another lane resets an
-    env in that step (its flag on the board, set as the reset begins: ``mark``), it
-    prepares its own envs' next resets (``_prepare_resets``) until every other lane has
-    taken the step, at most once a step. A reset costs 3–8 steps' time; the lanes step
-    in lockstep, so without this the others would only wait."""
-
-    __slots__ = ("_busy", "_ctrl", "_envs", "_last", "_others", "mark")
-
-    def __init__(self, board: _Board, lane: int, envs: list[gym.Env]) -> None:
-        ctrl = self._ctrl = board.ctrl
-        lanes = board.lanes
-        self._envs = envs
-        self._others = [board.resetting + other for other in range(lanes) if other != lane]
-        self._busy = [board.finished + other for other in range(lanes) if other != lane]
-        self._last = -1
-        self.mark = functools.partial(_mark_reset, ctrl, board.resetting + lane)
-
-    def __call__(self, seq: int) -> bool:
-        """Prepare if another lane resets in step ``seq``; whether it did (then not
-        again this step)."""
-        if self._last == seq:
-            return False
-        ctrl = self._ctrl
-        for slot in self._others:
-            if ctrl[slot] == seq:
-                self._last = seq
-                _prepare_resets(self._envs, lambda: self.done(seq))
-                return True
-        return False
-
-    def done(self, seq: int) -> bool:
-        """Whether every other lane has taken step ``seq`` (this process: its own envs;
-        a worker: its results are on the board or in its pipe), or a later one (step
-        numbers only grow: a lane may be on to the next step before this one looks)."""
-        ctrl = self._ctrl
-        return all(ctrl[slot] >= seq for slot in self._busy)
-
-
-def _mark_reset(ctrl: np.ndarray, slot: int) -> None:
-    """Say on the board that a lane resets an env in the step posted (``_Idle.mark``)."""
-    ctrl[slot] = ctrl[0]
-
-
-def _await_answer(conn: Connection, board: _Board, lane: int, seq: int,
-                  idle: _Idle | None = None) -> Any:
-    """Wait for worker ``lane``'s results of step ``seq``: None when they are on the
-    board, else the next message on its pipe (its answer ``(ok, data, seq)``: an error,
-    or infos the board cannot hold; or an older answer). Spins: the worker is stepping on
-    another core; meanwhile ``idle(seq)`` (``_Idle``), until it did something. A dead
-    worker's pipe raises EOFError here."""
-    done = board.ctrl
-    while True:
-        if done[1 + lane] == seq:
-            return None
-        if conn.poll(0):
-            return conn.recv()
-        if idle is not None and idle(seq):
-            idle = None
-        else:
-            os.sched_yield()
-
-
-def _await_command(conn: Connection, board: _Board | None, seen: int, spin_s: float,
-                   lane: int = 1, idle: _Idle | None = None) -> Any:
-    """Worker ``lane``'s next command: ``("post", n)`` when step ``n`` is on the board,
-    else the pipe's next message; polled for up to ``spin_s`` (meanwhile ``idle(seen)``,
-    ``_Idle``, until it did something; the spin starts again after it), then slept for
-    on the pipe: the worker says so on the board and the parent, posting a step, sends a
-    wake-up. (x86 may order the parent's read of that flag before its write of the step
-    number: a missed wake-up costs one nap, ``BOARD_NAP_S``.)"""
-    if board is None:
-        return _receive(conn, spin_s)
-    ctrl = board.ctrl
-    deadline = time.perf_counter() + spin_s
-    asleep = board.asleep + lane
-    try:
-        while True:
-            if ctrl[0] != seen:
-                return "post", int(ctrl[0])
-            if conn.poll(0):
-                message = conn.recv()
-                if message[0] != "wake":
-                    return message
-            elif idle is not None and idle(seen):
-                idle = None
-                ctrl[asleep] = 0  # spinning again (a wake-up sent meanwhile is skipped)
-                deadline = time.perf_counter() + spin_s
-            elif ctrl[asleep]:
-                conn.poll(BOARD_NAP_S)  # until a message (a wake-up) or the nap's end
-            elif time.perf_counter() < deadline:
-                os.sched_yield()
-            else:
-                ctrl[asleep] = 1  # then the board is looked at once more before a nap
-    finally:
-        ctrl[asleep] = 0
-
-
-def _receive(conn: Connection, spin_s: float) -> Any:
-    """The next message on ``conn``, polled for up to ``spin_s`` before blocking."""
-    deadline = time.perf_counter() + spin_s
-    while not conn.poll(0) and time.perf_counter() < deadline:
-        os.sched_yield()  # a runnable thread on this core goes first
-    return conn.recv()
-
-
-def _worker(conn: Connection, shm: Any, space: gym.Space,
-            num_envs: int, kwargs: dict[str, Any], start: int, stop: int,
-            parent_pid: int, board: _Board | None = None, lane: int = 1) -> None:
-    """A worker (lane ``lane``): envs ``start:stop`` of the vector env, commands from
-    ``conn``, steps from the ``board`` if there is one."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    if sys.platform.startswith("linux"):
-        with contextlib.suppress(OSError, AttributeError):
-            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
-    if os.getppid() != parent_pid:
-        os._exit(1)
-    # One OpenCV thread: the processes are the parallelism; OpenCV's pool of one thread per
-    # core in every worker oversubscribed the cores (the 0.74× of two async envs).
-    cv2.setNumThreads(1)
-    buffer = read_from_shared_memory(space, shm, num_envs)  # the whole batch
-    envs: list[gym.Env] = []
-    try:
-        envs = [gym.make(ENV_ID, **kwargs) for _ in range(start, stop)]
-        conn.send((True, None))
-        seen = 0  # the last step taken from the board
-        known: list[tuple | None] = [None] * (stop - start)  # as the parent's _known
-        idle = _Idle(board, lane, envs) if board is not None else None
-        while True:
-            command, data = _await_command(conn, board, seen, WAIT_SPIN_S, lane, idle)
-            if command == "post":
-                assert board is not None
-                seen = data
-                try:
-                    answer = _step_envs(envs, space, buffer, start,
-                                        board.actions[start:stop].copy(),
-                                        board.autoreset[start:stop].astype(np.bool_),
-                                        bool(board.ctrl[1]), idle.mark)  # type: ignore[union-attr]
-                    if _post_results(board, start, answer, known):
-                        board.ctrl[board.finished + lane] = seen  # before the hand-over
-                        board.ctrl[1 + lane] = seen  # last: it hands the results over
-                    else:
-                        layouts = [_layout(a[3]) for a in answer]
-                        board.ctrl[board.finished + lane] = seen
-                        conn.send((True, answer, seen))
-                        known = layouts
-                        board.ctrl[board.layouts + lane] += 1
-                except Exception as exc:  # reported to the parent, raised there
-                    board.ctrl[board.finished + lane] = seen
-                    conn.send((False, (type(exc).__name__, str(exc), traceback.format_exc()),
-                               seen))
-                continue
-            try:
-                if command == "step":
-                    answer: Any = _step_envs(envs, space, buffer, start, *data)
-                elif command == "reset":
-                    answer = _reset_envs(envs, space, buffer, start, *data)
-                elif command == "call":
-                    answer = _call_envs(envs, *data)
-                elif command == "set":
-                    answer = _set(envs, *data)
-                elif command == "wrapped":
-                    answer = [_wrapped(env, data) for env in envs]
-                elif command == "close":
-                    break
-                else:
-                    raise RuntimeError(f"unknown command {command!r}")
-                conn.send((True, answer))
-            except Exception as exc:  # reported to the parent, raised there
-                conn.send((False, (type(exc).__name__, str(exc), traceback.format_exc())))
-    except (EOFError, KeyboardInterrupt, BrokenPipeError):
-        pass
-    except Exception as exc:  # set-up failed
-        with contextlib.suppress(Exception):
-            conn.send((False, (type(exc).__name__, str(exc), traceback.format_exc())))
-    finally:
-        for env in envs:
-            with contextlib.suppress(Exception):
-                env.close()
-        conn.close()

@@ -3,7 +3,6 @@ Gymnasium's SyncVectorEnv bit for bit, and fails cleanly."""
 
 from __future__ import annotations
 
-import math
 import os
 import signal
 import threading
@@ -212,7 +211,7 @@ def test_call_and_close() -> None:
     assert venv.get_attr("observation_mode")[0].value == "lanes"
     frames = venv.call("camera_frame")
     assert len(frames) == 2 and frames[0].shape == (480, 752)
-    procs = list(venv._procs)
+    procs = [w.process for w in venv._workers]
     assert len(procs) == 1  # env 0 in this process, env 1 in the worker
     venv.close()
     assert all(not p.is_alive() for p in procs)
@@ -250,11 +249,11 @@ def test_merged_infos_match_gymnasiums_layout_also_nested_and_missing_keys() -> 
 
 def test_a_dead_worker_is_a_clear_error() -> None:
     venv = TfaldaTrackVectorEnv(2, workers=2, track="oval")
-    procs = list(venv._procs)
+    procs = [w.process for w in venv._workers]
     try:
         venv.reset(seed=0)
-        venv._procs[0].kill()
-        venv._procs[0].join()
+        venv._workers[0].process.kill()
+        venv._workers[0].process.join()
         with pytest.raises(RuntimeError, match="died"):
             venv.step(np.zeros((2, 1), np.float32))
             venv.step(np.zeros((2, 1), np.float32))
@@ -352,139 +351,13 @@ def test_steps_go_through_the_board_and_equal_the_pipes_and_sync() -> None:
     assert_same(got, want)
 
 
-def test_the_board_carries_infos_exactly_or_refuses_them() -> None:
-    import multiprocessing
-
-    from tfalda_sim.envs.vector import (
-        BOARD_INFO_SLOTS,
-        _Board,
-        _layout,
-        _post_results,
-        _read_results,
-    )
-
-    board = _Board(multiprocessing.get_context("spawn"), 3, (1,), 2)
-    infos = [{"x": 0.1, "n": 2**62, "ok": True, "track": "oval", "y": -0.0},
-             {"x": math.nextafter(1.0, 2.0), "n": -5, "ok": False, "track": "oval",
-              "y": math.nan, "z": math.inf}]
-    answers = [(0.5, False, True, infos[0]), (-1.25, True, False, infos[1])]
-    known: list[tuple | None] = [None, _layout(infos[0]), _layout(infos[1])]
-    assert _post_results(board, 1, answers, known[1:])
-    got = _read_results(board, 1, 3, known)
-    for (reward, term, trunc, info), want in zip(got, answers, strict=True):
-        assert (reward, term, trunc) == want[:3]
-        assert repr(list(info.items())) == repr(list(want[3].items()))  # nan, -0.0 too
-        assert [type(v) for v in info.values()] == [type(v) for v in want[3].values()]
-    # Anything but the known layout is refused (the pipe carries it): another key order,
-    # type or string, an int beyond int64, an array, too many numbers.
-    for bad in ({"n": 2, "x": 0.1, "ok": True, "track": "oval", "y": 0.0},
-                {"x": 1, "n": 2, "ok": True, "track": "oval", "y": 0.0},
-                {"x": 0.1, "n": 2, "ok": True, "track": "thesis", "y": 0.0},
-                {"x": 0.1, "n": 2**64, "ok": True, "track": "oval", "y": 0.0}):
-        assert not _post_results(board, 1, [(0.0, False, False, bad)], known[1:2])
-    assert _layout({"a": np.zeros(2)}) is None
-    assert _layout({f"k{i}": 1.0 for i in range(BOARD_INFO_SLOTS + 1)}) is None
-    assert _layout({f"k{i}": 1.0 for i in range(BOARD_INFO_SLOTS)}) is not None
-
-
-class _Preparing:
-    """An env's ``unwrapped`` as ``_Idle`` sees it: records each ``prepare_reset(stop)``
-    and what ``stop()`` said then; ``then`` runs after (a lane finishing meanwhile)."""
-
-    def __init__(self, then: Any = None) -> None:
-        self.calls: list[bool] = []
-        self.then = then
-        self.unwrapped = self
-
-    def prepare_reset(self, stop: Any) -> bool:
-        self.calls.append(stop())
-        if self.then is not None:
-            self.then()
-        return True
-
-
-def _board(lanes: int) -> Any:
-    import multiprocessing
-
-    from tfalda_sim.envs.vector import _Board
-    return _Board(multiprocessing.get_context("spawn"), 2 * lanes, (1,), lanes)
-
-
-@pytest.mark.parametrize("lane", [0, 1, 2])
-def test_a_lane_prepares_while_another_lane_resets_until_the_others_are_done(
-        lane: int) -> None:
-    """``_Idle`` of a lane of three: nothing while no other lane resets in the step (its
-    own reset does not count), then ``prepare_reset`` on its envs with a ``stop`` that
-    says whether every other lane took the step (this process after its own envs, the
-    workers when they hand their results over), at most once a step; ``mark`` flags the
-    lane's reset in the step posted."""
-    from tfalda_sim.envs.vector import _Idle
-
-    board = _board(3)
-    ctrl = board.ctrl
-    done = [board.finished + other for other in range(3)]
-    others_done = done[:lane] + done[lane + 1:]
-
-    def finish() -> None:  # the other lanes take step ctrl[0], the first is on to the next
-        for k, slot in enumerate(others_done):
-            ctrl[slot] = ctrl[0] + (k == 0)
-
-    first, second = _Preparing(then=finish), _Preparing()
-    idle = _Idle(board, lane, [first, second])
-    seq = ctrl[0] = 7
-    assert not idle(seq) and not first.calls  # nobody resets
-    idle.mark()
-    assert ctrl[board.resetting + lane] == seq
-    assert not idle(seq) and not first.calls  # only this lane
-    other = (lane + 1) % 3
-    _Idle(board, other, []).mark()
-    assert idle(seq)
-    # The others still stepped when it began, and were done after the first env.
-    assert first.calls == [False] and second.calls == []
-    assert not idle(seq) and len(first.calls) == 1  # once a step
-    ctrl[0] = 8
-    _Idle(board, other, []).mark()  # the other lane resets in step 8 too
-    assert idle(8) and first.calls == [False, False]
-    assert not idle(9)  # flags of older steps count no more
-
-
-def test_waits_prepare_resets_while_another_lane_resets() -> None:
-    """This process waiting for a worker's results, and a worker waiting for the next
-    step: each prepares its envs' next resets when another lane resets in the step (and
-    goes on waiting), until the others are done."""
-    from tfalda_sim.envs.vector import _await_answer, _await_command, _Idle
-
-    class Quiet:  # a pipe with nothing on it (a wait that never ends fails instead)
-        polls = 0
-
-        def poll(self, timeout: float = 0.0) -> bool:
-            self.polls += 1
-            assert self.polls < 100_000, "waited on and on: nothing was prepared"
-            return False
-
-    board = _board(2)
-    ctrl = board.ctrl
-    seq = ctrl[0] = 3
-    # This process waits for worker 1, which resets; the worker is done after one stage.
-    parent_env = _Preparing(then=lambda: ctrl.__setitem__(2, seq))  # results on the board
-    _Idle(board, 1, []).mark()
-    assert _await_answer(Quiet(), board, 1, seq, _Idle(board, 0, [parent_env])) is None
-    assert parent_env.calls == [False]
-    # Worker 1 waits for step 4 while this process resets in step 3 and then posts.
-    worker_env = _Preparing(then=lambda: ctrl.__setitem__(0, seq + 1))
-    _Idle(board, 0, []).mark()
-    assert _await_command(Quiet(), board, seq, 0.5, 1, _Idle(board, 1, [worker_env])) == (
-        "post", seq + 1)
-    assert worker_env.calls == [False]
-
-
 @pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
 def test_a_worker_prepares_its_next_reset_while_this_process_resets(
         mode: AutoresetMode) -> None:
     """Two envs, in both autoreset modes: while the env this process steps resets (made
     slow here), the worker generates its env's next track, builds its scene and paints
     its first frame (a later ``prepare_reset`` finds nothing to do), and the rollout
-    equals ``SyncVectorEnv``'s. Both lanes say on the board when they took a step."""
+    equals ``SyncVectorEnv``'s. Both slots say on the board when they took a step."""
     venv = TfaldaTrackVectorEnv(2, workers=2, autoreset_mode=mode)
     sync = gym.make_vec("TfaldaTrack-v0", num_envs=2, vectorization_mode="sync",
                         vector_kwargs={"autoreset_mode": mode})
@@ -502,7 +375,7 @@ def test_a_worker_prepares_its_next_reset_while_this_process_resets(
         board = venv._board
         for _ in range(200):
             assert_same(venv.step(action), sync.step(action))
-            # Both lanes said they took the step, the worker also when its results went
+            # Both slots said they took the step, the worker also when its results went
             # through its pipe (SAME_STEP: a reset's final observation).
             assert board.ctrl[board.finished] == board.ctrl[board.finished + 1] == venv._seq
             if venv.call_on([0], "_step_count") == (0,):  # env 0 has reset
@@ -520,13 +393,13 @@ def test_a_worker_prepares_its_next_reset_while_this_process_resets(
 def _abandon_next_wait(monkeypatch: pytest.MonkeyPatch) -> None:
     """The next wait for a worker's posted step raises KeyboardInterrupt (a Ctrl-C)."""
     from tfalda_sim.envs import vector
-    real = vector._await_answer
+    real = vector.await_results
 
     def interrupted(*args: Any) -> Any:
-        monkeypatch.setattr(vector, "_await_answer", real)
+        monkeypatch.setattr(vector, "await_results", real)
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(vector, "_await_answer", interrupted)
+    monkeypatch.setattr(vector, "await_results", interrupted)
 
 
 def _board_and_sync() -> tuple[TfaldaTrackVectorEnv, gym.vector.VectorEnv]:
@@ -591,7 +464,7 @@ def test_after_a_step_given_up_on_commands_and_steps_stay_in_step(
         assert_same(venv.reset(seed=0), sync.reset(seed=0))
         for _ in range(3):
             assert_same(venv.step(action), sync.step(action))
-        worker = venv._procs[0]
+        worker = venv._workers[0].process
         os.kill(worker.pid, signal.SIGSTOP)  # it cannot take the next steps yet
         wake = threading.Timer(0.3, os.kill, (worker.pid, signal.SIGCONT))
         try:
