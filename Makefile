@@ -31,12 +31,10 @@ test: install
 	$(BIN)/python tools/lint_imports.py
 	$(BIN)/python -m pytest -q
 
+# Every main benchmark with --json into benchmarks/results/, then BENCHMARKS.md from them
+# (one: $(BIN)/python benchmarks/report.py --run bench_env).
 bench: install
-	$(BIN)/python benchmarks/bench_tracks.py
-	$(BIN)/python benchmarks/bench_render.py
-	$(BIN)/python benchmarks/bench_perception.py
-	$(BIN)/python benchmarks/bench_reset.py
-	$(BIN)/python benchmarks/bench_env.py
+	$(BIN)/python benchmarks/report.py --run
 
 # The charts and figures of docs/evaluation.md (about 5 min on 2 cores).
 EV = docs/evaluation

@@ -1,11 +1,17 @@
-"""Shared by the benchmarks: pin to one core and describe the machine."""
+"""Shared by the benchmarks: pin to one core and describe the host and the code measured."""
 
 from __future__ import annotations
 
+import datetime
 import os
 import platform
+import subprocess
+from pathlib import Path
 
 import cv2
+
+REPO = Path(__file__).resolve().parents[1]
+"""The checkout the benchmarks belong to (its commit is reported with the figures)."""
 
 
 def pin_to_one_core() -> None:
@@ -21,9 +27,9 @@ SIMD_FLAGS: tuple[str, ...] = ("avx512f", "avx2", "avx", "sse4_2", "neon", "asim
 
 def cpu() -> dict[str, str]:
     """The CPU's model name and its widest vector instruction set (Linux's
-    ``/proc/cpuinfo``; ``platform.processor()`` elsewhere): figures of different sessions
-    compare only on the same CPU, and this VM's host has changed between sessions (2.0 GHz
-    in the sixth to twelfth, a 2.8 GHz Xeon with AVX-512 in the thirteenth)."""
+    ``/proc/cpuinfo``; ``platform.processor()`` elsewhere): figures compare only on the
+    same CPU, and the VM this project is measured on has been moved between hosts of
+    different CPUs (a 2.0 GHz one, a 2.8 GHz Xeon with AVX-512, an AMD EPYC)."""
     model, flags = "", set()
     try:
         with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as f:
@@ -40,6 +46,34 @@ def cpu() -> dict[str, str]:
             "simd": simd}
 
 
+PACKAGE_DIRS: tuple[str, ...] = ("tfalda_sim", "tracks", "envs", "agents")
+"""The checkout's folders that hold the package's code (pyproject.toml's package-dir)."""
+
+
+def commit() -> str:
+    """The checkout's commit (short hash, ``+`` if the package's tracked files differ
+    from it), or "" outside a git checkout: which code the figures are of."""
+    def git(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(["git", "-C", str(REPO), *args], capture_output=True,
+                              text=True, check=False)
+    try:
+        head = git("rev-parse", "--short", "HEAD")
+        if head.returncode != 0:
+            return ""
+        dirty = git("diff", "--quiet", "HEAD", "--", *PACKAGE_DIRS).returncode != 0
+    except OSError:
+        return ""
+    return head.stdout.strip() + ("+" if dirty else "")
+
+
+def host() -> dict[str, object]:
+    """What every benchmark's JSON reports about where and when it ran: the core count,
+    the CPU, Python, the date (UTC) and the commit measured."""
+    return {"cores": os.cpu_count(), **cpu(), "python": platform.python_version(),
+            "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+            "commit": commit()}
+
+
 def machine() -> dict[str, object]:
-    return {"cores": os.cpu_count(), **cpu(), "pinned_to_one_core": True,
-            "opencv_threads": cv2.getNumThreads(), "python": platform.python_version()}
+    """``host()`` for a benchmark pinned to one core with OpenCV on one thread."""
+    return {**host(), "pinned_to_one_core": True, "opencv_threads": cv2.getNumThreads()}

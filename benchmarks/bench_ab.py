@@ -1,6 +1,6 @@
-"""Side-by-side benchmark of this checkout against another one (issue 18: "≥ 2× the
-previous step rate" needs the previous code measured in the same minutes, since this VM's
-speed drifts by 2× within a day).
+"""Side-by-side benchmark of this checkout against another one: a speed-up over previous
+code ("≥ 2× the previous step rate") needs the previous code measured in the same minutes,
+since this VM's speed drifts by 2× within a day.
 
 Each checkout measures "lanes" steps/s on a fixed track (the oval) and with a new
 generated track per reset (random actions, resets included) and the median
@@ -35,7 +35,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from _machine import cpu
+from _machine import host
 
 CHILD_FLAG = "--child"
 TURNS_FLAG = "--child-turns"
@@ -213,7 +213,7 @@ def run_turns(other: str, steps: int, resets: int, quiet: bool) -> dict[str, obj
             if seconds[side]["generated"] else float("nan"),
             "reset_median_ms": float(statistics.median(times[side]) * 1000.0)
             if times[side] else float("nan")}
-    return {"machine": {"cores": os.cpu_count(), **cpu(), "one_core_in_turns": core},
+    return {"machine": {**host(), "one_core_in_turns": core},
             "other_python": other, "steps": done["fixed"], "resets": done["reset"],
             "turn_steps": TURN_STEPS, "turn_resets": TURN_RESETS,
             "this": figures["this"], "other": figures["other"],
@@ -260,7 +260,7 @@ def run(other: str, steps: int, resets: int, pairs: int, quiet: bool) -> dict[st
                      "ratio": {key: this[key] / that[key] for key in this}})
         if not quiet:
             print(f"pair {k + 1}/{pairs} done", file=sys.stderr)
-    return {"machine": {"cores": os.cpu_count(), **cpu(), "pinned_one_core_each": True},
+    return {"machine": {**host(), "pinned_one_core_each": True},
             "other_python": other, "steps": steps, "resets": resets, "pairs": rows,
             "interrupted": interrupted}
 

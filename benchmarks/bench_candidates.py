@@ -9,9 +9,10 @@ detector runs when every sum fits 16 bits, as for the thesis' ROIs):
 
 - the current ``search_candidates``: blocks of ``SIMD_BLOCK`` starts summed in vector
   registers over a segment's samples, offsets from a table per image height;
-- the previous one (issue 18's fifth session, kept below as the same-run reference): a
-  row addition through memory per sample, padded to whole blocks, with a DDA step;
-- issue 4's (kept below): unpadded row additions whose rests ran as scalar code.
+- the previous one (kept below as the same-run reference, commit b819aa8): a row
+  addition through memory per sample, padded to whole blocks, with a DDA step;
+- the first one (kept below, commit 1586277): unpadded row additions whose rests ran as
+  scalar code.
 
 All must give the same candidates. Reported: µs per ROI, the ratios to the current
 kernel, and the work against one core's SIMD: the useful int32 additions ``Σ n·m``
@@ -20,8 +21,7 @@ additions per ns that makes.
 
 Then the detector's whole per-ROI path on the same crops (resize, Sobel, search, the
 lane's choice): the current ``find_lane_in_crop`` (the resize in numba, one call) against
-the previous one (issue 18's twelfth session: ``cv2.resize``, then ``find_lane``), which
-must pick the same lanes.
+the previous one (``cv2.resize``, then ``find_lane``), which must pick the same lanes.
 """
 
 from __future__ import annotations
@@ -54,9 +54,9 @@ from tfalda_sim.tracks import generate, load_named
 
 def row_search(block: int):  # type: ignore[no-untyped-def]  # a numba dispatcher
     """The candidate search before this one, unchanged, padded to ``block`` lanes: each
-    sample a row addition through memory with a DDA step. ``block`` 1 is issue 4's search
-    (commit 1586277: the rows' rests ran as scalar code), ``SIMD_BLOCK`` the fifth
-    session's (commit b819aa8). ``block`` is a constant of the compiled code, as it was."""
+    sample a row addition through memory with a DDA step. ``block`` 1 is the first search
+    (commit 1586277: the rows' rests ran as scalar code), ``SIMD_BLOCK`` the previous one
+    (commit b819aa8). ``block`` is a constant of the compiled code, as it was."""
 
     @njit(error_model="numpy")
     def search(flat: np.ndarray, height: int, width: int, best_i: np.ndarray,
@@ -178,7 +178,7 @@ def per_roi_paths(n: int, repeat: int) -> dict[str, object]:
 
 
 KERNELS: tuple[tuple[str, str, str], ...] = (
-    ("issue_4", "issue 4's (reference)", "int32"),
+    ("first", "first (unpadded rows)", "int32"),
     ("previous", "previous (rows through memory)", "int32"),
     ("previous_uint16", "previous, uint16", "uint16"),
     ("current", "current (register blocks)", "int32"),
@@ -204,7 +204,7 @@ def run(n: int, repeat: int) -> dict[str, object]:
     inputs = {"int32": padded(np.int32), "uint16": padded(np.uint16)}
     assert max(max(h, w) for _, h, w, _, _ in inputs["uint16"]) <= UINT16_MAX_SAMPLES
     tables = {(h, w): segment_steps(h, w) for _, h, w, _, _ in inputs["int32"]}
-    kernels = {"issue_4": previous_search_candidates, "previous": row_search_candidates,
+    kernels = {"first": previous_search_candidates, "previous": row_search_candidates,
                "previous_uint16": row_search_candidates}
 
     def current(flat: np.ndarray, h: int, w: int, bi: np.ndarray, be: np.ndarray,
@@ -231,7 +231,7 @@ def run(n: int, repeat: int) -> dict[str, object]:
     times, results = {}, {}
     for key, _, dtype in KERNELS:
         times[key], results[key] = time_kernel(key, dtype)
-    reference = results["issue_4"]
+    reference = results["first"]
     same = all(np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
                for r in results.values() for a, b in zip(r, reference, strict=True))
     rois = inputs["int32"]
@@ -251,7 +251,7 @@ def run(n: int, repeat: int) -> dict[str, object]:
             "speed_up_over_previous": times["previous"] / times["current"],
             "speed_up_over_previous_uint16": times["previous_uint16"]
             / times["current_uint16"],
-            "speed_up_over_issue_4": times["issue_4"] / times["current"],
+            "speed_up_over_first": times["first"] / times["current"],
             "useful_additions_per_roi": useful, "executed_additions_per_roi": executed,
             "per_roi_path": per_roi_paths(n, repeat)}
 
@@ -278,8 +278,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{k['label']:<34}{k['us_per_roi']:>9.1f}{k['useful_additions_per_ns']:>9.2f}"
               f"{k['time_over_current']:>11.2f}")
     print(f"speed-up over the previous kernel {r['speed_up_over_previous']:.2f}× (uint16 "
-          f"{r['speed_up_over_previous_uint16']:.2f}×), over issue 4's "
-          f"{r['speed_up_over_issue_4']:.2f}×; results identical: {r['identical_results']}")
+          f"{r['speed_up_over_previous_uint16']:.2f}×), over the first "
+          f"{r['speed_up_over_first']:.2f}×; results identical: {r['identical_results']}")
     print(f"additions per ROI: {r['useful_additions_per_roi']:.0f} useful, "
           f"{r['executed_additions_per_roi']:.0f} executed with padding "
           f"({r['kernels']['current_uint16']['executed_additions_per_ns']:.2f} per ns, "

@@ -3,8 +3,8 @@ git revision's, in one process, swapped between turns.
 
 Replayed kernel calls mislead: a kernel fed the same recorded frames back to back finds
 its maps in cache, and a change that wins there can lose in an env step, where the
-renderer, the detector and pymunk take turns with the caches (the sixteenth session's
-offset ``_sample_atlas``: 3–6 % faster on replayed frames, 2–9 % slower in env steps).
+renderer, the detector and pymunk take turns with the caches (an offset ``_sample_atlas``
+once read 3–6 % faster on replayed frames and 2–9 % slower in env steps).
 And two processes, or two checkouts taking turns, differ by more than a few per cent on
 this VM from one minute to the next. So here one env steps in turns of ``--turn-steps``
 random-action steps; before each turn the named kernels of ``--module`` are set to either
@@ -29,7 +29,6 @@ import argparse
 import importlib
 import importlib.util
 import json
-import os
 import statistics
 import subprocess
 import sys
@@ -39,7 +38,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from _machine import cpu, pin_to_one_core
+from _machine import host, pin_to_one_core
 
 REPO = Path(__file__).resolve().parents[1]
 """The checkout whose code is "after" and whose git history holds "before"."""
@@ -148,7 +147,7 @@ def run(rev: str, module: str, names: list[str], track: str, observation: str, r
         env.close()
     ratios = [a / b for a, b in zip(per["after"], per["before"], strict=True)]
     return {
-        "machine": {"cores": os.cpu_count(), **cpu(), "pinned_to_one_core": True},
+        "machine": {**host(), "pinned_to_one_core": True},
         "rev": rev, "module": module, "kernels": names, "track": track,
         "observation": observation, "rounds": rounds, "turn_steps": turn_steps,
         "before_us_per_step": statistics.median(per["before"]),

@@ -1,7 +1,7 @@
 """Benchmark of the lazy marking paint (``tfalda_sim.tracks.raster._paint_listed``) on the
 tiles an env really paints: this checkout's kernel against another git revision's, in one
-process, in turns (issue 18: a new generated track's ground is painted as the car comes
-to see it).
+process, in turns (a new generated track's ground is painted lazily, as the car comes to
+see it, so this paint is part of every step on generated tracks).
 
     python benchmarks/bench_paint.py --rev REV [--steps 3000] [--rounds 9] [--json]
 
@@ -24,14 +24,13 @@ ratio after / before, with the core count; a table, or ``--json``.
 from __future__ import annotations
 
 import hashlib
-import os
 import statistics
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-from _machine import cpu, pin_to_one_core
+from _machine import host, pin_to_one_core
 from bench_kernel_ab import AbError, ab_parser, compiled, module_source, report
 
 MODULE = "tfalda_sim.tracks.raster"
@@ -92,7 +91,7 @@ def run(rev: str, steps: int, rounds: int, quiet: bool) -> dict[str, Any]:
                "after": compiled(current, Path(current.__file__).read_text(), "after")}
     if not callable(getattr(modules["before"], KERNEL, None)):
         raise AbError(f"{MODULE} at {rev} has no {KERNEL}; give a revision with the lazy "
-                      "marking map (issue 18)")
+                      "marking map (tiles painted on demand)")
     episodes = record(steps, quiet)
     # Each version paints through its own module's map (its own arguments: chunk boxes,
     # row masks), made afresh for each episode and pass (untimed) on one memory.
@@ -139,7 +138,7 @@ def run(rev: str, steps: int, rounds: int, quiet: bool) -> dict[str, Any]:
     ratios = [a / b for a, b in zip(per["after"], per["before"], strict=True)]
     before, after = statistics.median(per["before"]), statistics.median(per["after"])
     return {
-        "machine": {"cores": os.cpu_count(), **cpu(), "pinned_to_one_core": True},
+        "machine": {**host(), "pinned_to_one_core": True},
         "rev": rev, "steps": steps, "rounds": rounds, "episodes": len(episodes),
         "calls": n_calls, "tiles": n_tiles, "identical": True,
         "before_ms": before * 1e3, "after_ms": after * 1e3,

@@ -7,7 +7,7 @@ generated ones, then fed to ``TfaldaDetector.process`` in order, as a drive woul
 Presets: the thesis ("all on"), without the LIS, and the improved one with two and three
 ROI rows; the Hough baseline with the seed's numbers and with the simulator preset (the
 seed's numbers find no rendered marking, so they time an almost empty pipeline). The
-process is pinned to one CPU and OpenCV to one thread. Target (issue 4): thesis preset
+process is pinned to one CPU and OpenCV to one thread. Target: thesis preset
 ≤ 0.5 ms median per frame.
 """
 

@@ -5,7 +5,7 @@
 Frames are rendered along the right lane's ideal line of several tracks (named and
 generated, obstacles included), as a drive would: once as full frames (the env's "image"
 mode), once as the four thesis ROIs only (its "lanes" mode). The process is pinned to one CPU and
-OpenCV to one thread. Targets (issue 3): full frame ≤ 1.0 ms median; the four ROIs
+OpenCV to one thread. Targets: full frame ≤ 1.0 ms median; the four ROIs
 ≥ 5× faster than the full frame.
 """
 

@@ -1,7 +1,7 @@
-"""Benchmark of ``env.reset()`` (issue 18): a reset onto a new generated track, with the
-scene painted lazily (the env's default) and eagerly (the whole marking map and mip atlas
-at reset, as before issue 18), and a reset on a fixed track; "lanes" mode, first
-observation included, one core.
+"""Benchmark of ``env.reset()``: a reset onto a new generated track, with the scene
+painted lazily (the env's default) and eagerly (the whole marking map and mip atlas at
+reset: the previous implementation, the same-run reference), and a reset on a fixed
+track; "lanes" mode, first observation included, one core.
 
     python benchmarks/bench_reset.py [--resets 200] [--json]
 

@@ -3,21 +3,20 @@
     python benchmarks/bench_tracks.py [--seeds 1000] [--raster-seeds 50] [--json]
 
 Prints a table (or one JSON object with ``--json``). JIT compilation is warmed up first
-and not counted. Targets (issue 2): generation < 50 ms median, rasterisation < 200 ms.
+and not counted. Targets: generation < 50 ms median, rasterisation < 200 ms.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import os
 import platform
 import statistics
 import sys
 import time
 
 import numpy as np
-from _machine import cpu
+from _machine import host
 from tqdm import tqdm
 
 from tfalda_sim.tracks import generate, load_named, rasterize, validate
@@ -71,8 +70,7 @@ def run(seeds: int, raster_seeds: int, quiet: bool) -> dict[str, object]:
                         "locate_us": single * 1e6, "locate_many_us_per_point": batch * 1e6}
 
     return {
-        "machine": {"cores": os.cpu_count(), **cpu(), "python": platform.python_version(),
-                    "processor": platform.processor() or platform.machine()},
+        "machine": {**host(), "processor": platform.processor() or platform.machine()},
         "generate": {"seeds": seeds, "invalid": invalid, **_ms(gen_t),
                      "median_length_m": statistics.median(lengths)},
         "validate": {**_ms(val_t)},

@@ -1,4 +1,4 @@
-"""A/B benchmark of ``gymnasium.make_vec("TfaldaTrack-v0")`` (issue 18's "2 envs ≥ 1.7×
+"""A/B benchmark of ``gymnasium.make_vec("TfaldaTrack-v0")`` (the target "2 envs ≥ 1.7×
 one env"): this checkout against another one, in turns, so that the host's drift (± 10 %
 within minutes here) falls on both alike.
 
@@ -35,7 +35,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from _machine import cpu
+from _machine import host
 from bench_ab import _status, _TurnChild
 
 CHILD_FLAG = "--child"
@@ -136,7 +136,7 @@ def run(other: str, rounds: int, turn_steps: int, warmup_steps: int, quiet: bool
             took_s = seconds[side][key]
             figures[side][key] = envs * turn_steps * done / took_s if took_s else float("nan")
         figures[side]["2/1"] = figures[side]["2"] / figures[side]["1"]
-    return {"machine": {"cores": os.cpu_count(), **cpu()}, "other_python": other,
+    return {"machine": host(), "other_python": other,
             "rounds": done, "turn_steps": turn_steps, "warmup_steps": warmup_steps,
             "figures": {key: label for key, label in FIGURES},
             "this": figures["this"], "other": figures["other"],

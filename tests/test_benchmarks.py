@@ -1,14 +1,19 @@
-"""The benchmark scripts run and report what BENCHMARKS.md quotes (no timing is asserted:
+"""The benchmark scripts run and report what BENCHMARKS.md quotes, and BENCHMARKS.md is
+what ``benchmarks/report.py`` makes of their committed results (no timing is asserted:
 speed is measured by the scripts, never by tests)."""
 
 from __future__ import annotations
 
+import copy
+import functools
+import importlib.util
 import itertools
 import json
 import os
 import subprocess
 import sys
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
@@ -16,10 +21,81 @@ BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
 def run_json(script: str, *args: str) -> dict:
+    """``script``'s ``--json`` output with ``args`` (run once per arguments in a test
+    session: the page's schema test and the script's own test share a run)."""
+    return copy.deepcopy(_run_json(script, args))
+
+
+@functools.cache
+def _run_json(script: str, args: tuple[str, ...]) -> dict:
     done = subprocess.run([sys.executable, str(BENCHMARKS / script), *args, "--json"],
                           capture_output=True, text=True, timeout=600, check=False)
     assert done.returncode == 0, done.stderr[-2000:]
     return json.loads(done.stdout)
+
+
+@functools.cache
+def report_module() -> ModuleType:
+    """``benchmarks/report.py``, imported from its file."""
+    spec = importlib.util.spec_from_file_location("benchmarks_report", BENCHMARKS / "report.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # its dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_benchmarks_md_is_generated_from_the_committed_results() -> None:
+    """BENCHMARKS.md is exactly what ``report.py`` writes from ``benchmarks/results/``
+    (``--check``: no benchmark runs), and stays one page."""
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "report.py"), "--check"],
+                          capture_output=True, text=True, timeout=60, check=False)
+    assert done.returncode == 0, (done.stdout[-3000:], done.stderr[-1000:])
+    page = (BENCHMARKS.parent / "BENCHMARKS.md").read_bytes()
+    assert len(page) <= 40_000
+
+
+def test_report_check_shows_a_difference(tmp_path: Path, monkeypatch, capsys) -> None:
+    """``--check`` against a page that differs: exit 1 and a diff naming the line."""
+    report = report_module()
+    page = tmp_path / "BENCHMARKS.md"
+    page.write_text(report.render(report.load_results()).replace("# Benchmarks",
+                                                                 "# Old benchmarks"))
+    monkeypatch.setattr(report, "PAGE", page)
+    assert report.main(["--check"]) == 1
+    out = capsys.readouterr().out
+    assert "-# Old benchmarks" in out and "+# Benchmarks" in out
+
+
+SMALL_ARGS: dict[str, tuple[str, ...]] = {
+    "bench_env": ("--steps", "40", "--warmup-steps", "20"),
+    "bench_reset": ("--resets", "3"),
+    "bench_render": ("--frames", "10"),
+    "bench_perception": ("--frames", "10"),
+    "bench_candidates": ("--rois", "24", "--repeat", "1"),
+    "bench_tracks": ("--seeds", "5", "--raster-seeds", "2"),
+}
+"""Each benchmark of the page with sizes small enough for a test."""
+
+
+def test_every_benchmark_of_the_page_has_small_sizes() -> None:
+    assert [b.name for b in report_module().BENCHMARKS] == list(SMALL_ARGS)
+
+
+@pytest.mark.parametrize("name", list(SMALL_ARGS))
+def test_the_page_reads_only_keys_the_script_prints(name: str) -> None:
+    """The script, run now with small sizes, prints the same keys as its committed result
+    (which is of the script as it is), and every key the page reads is one of them."""
+    report = report_module()
+    reads: dict[str, set[tuple[str, ...]]] = {}
+    report.render(report.load_results(reads))
+    printed = report.key_paths(run_json(f"{name}.py", *SMALL_ARGS[name]))
+    committed = json.loads((report.RESULTS / f"{name}.json").read_text(encoding="utf-8"))
+    assert report.key_paths(committed) == printed, (
+        f"benchmarks/results/{name}.json is not of the script as it is: rerun "
+        f"`python benchmarks/report.py --run {name}`")
+    assert reads[name] and reads[name] <= printed, reads[name] - printed
+    assert {"cpu", "cores", "python", "date", "commit"} <= set(committed["machine"])
 
 
 def test_bench_env_reports_every_configuration_against_car_racing() -> None:
@@ -116,11 +192,11 @@ def test_bench_candidates_finds_the_kernels_identical() -> None:
     assert result["identical_results"] is True
     assert result["rois"] == 24
     assert result["executed_additions_per_roi"] >= result["useful_additions_per_roi"] > 0
-    assert set(result["kernels"]) == {"issue_4", "previous", "previous_uint16", "current",
+    assert set(result["kernels"]) == {"first", "previous", "previous_uint16", "current",
                                       "current_uint16"}
     k = result["kernels"]
     for name, current in (("previous", "current"), ("previous_uint16", "current_uint16"),
-                          ("issue_4", "current")):  # each against the right current kernel
+                          ("first", "current")):  # each against the right current kernel
         assert k[name]["time_over_current"] == pytest.approx(
             k[name]["us_per_roi"] / k[current]["us_per_roi"])
     assert result["speed_up_over_previous_uint16"] == pytest.approx(
