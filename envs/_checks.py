@@ -156,7 +156,7 @@ def _check_fault_fields(where: str, fault: object) -> None:
             check_real(field, v)
 
 
-def check_faults(name: str, value: object) -> tuple[Fault, ...]:
+def check_fault_schedule(name: str, value: object) -> tuple[Fault, ...]:
     """A fault schedule: a sequence (list, tuple) of ``tfalda_sim.faults`` faults."""
     kinds = ", ".join(t.__name__ for t in FAULT_TYPES)
     if isinstance(value, str | bytes) or not isinstance(value, Sequence):

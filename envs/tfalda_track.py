@@ -36,7 +36,7 @@ from tfalda_sim.world import TrackPosition, World
 from ._checks import (
     check_bool,
     check_choice,
-    check_faults,
+    check_fault_schedule,
     check_int,
     check_optional,
     check_options,
@@ -278,6 +278,16 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
     holds for ``reset``: ``options`` is ``None`` or a mapping; ``start`` three finite
     numbers (``None``: random), ``speed_m_s`` in ``[0, car.max_speed_m_s]``, a ``track``
     of ``None`` draws a generated one.
+
+    ## Vectorized Environment
+    ``gymnasium.make_vec("TfaldaTrack-v0", num_envs=N)`` steps the envs in this process and
+    one worker process per further core (``tfalda_sim.envs.vector``); it works from any
+    script, guarded by ``if __name__ == "__main__":`` or not.
+
+    ## Version History
+    - v0: the first release (tfalda-sim 0.1.0): kinematic car, thesis and profile
+      cameras, ``"lanes"``/``"image"``/``"dict"`` observations, faults, domain
+      randomisation; rollouts bit-identical for equal seeds.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"],
@@ -319,7 +329,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         self.detector_config = resolve_detector(detector)
         self.reward_weights = check_optional("reward", reward, RewardWeights,
                                              "an tfalda_sim.envs.RewardWeights") or RewardWeights()
-        self.default_faults = check_faults("faults", faults)
+        self.default_faults = check_fault_schedule("faults", faults)
         self.track_spec = track
         # Resolved once (fails early on a bad track): a reset on the default track must
         # not generate it again.
@@ -529,7 +539,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             domain_randomization=check_bool(
                 "domain_randomization",
                 given.get("domain_randomization", self.domain_randomization)),
-            faults=(check_faults("faults", given["faults"]) if "faults" in given
+            faults=(check_fault_schedule("faults", given["faults"]) if "faults" in given
                     else self.default_faults))
 
     def _build_scene(self, track: Track, effects: Effects, scene_seed: int,
