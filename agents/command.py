@@ -15,21 +15,23 @@ from tfalda_sim.cli_common import (
     CliError,
     add_force_option,
     add_json_option,
-    add_sweep_options,
     bounded_int_arg,
     check_outputs,
-    check_sweep_options,
     interrupted,
     positive_int_arg,
     seed_arg,
     seed_range_arg,
     speed_arg_for,
-    sweep_backend,
-    sweep_exit,
 )
 from tfalda_sim.interrupts import holding_stops
 from tfalda_sim.perception.command import check_camera_geometry
 from tfalda_sim.perception.geometry import CameraGeometryError
+from tfalda_sim.sweep_runner import (
+    add_sweep_options,
+    check_sweep_options,
+    sweep_backend,
+    sweep_exit,
+)
 from tfalda_sim.tracks import NAMED_TRACKS
 from tfalda_sim.tracks.command import resolve_track_arg, track_arg_label, track_file_arg
 from tfalda_sim.vehicle import MIN_CRUISE_SPEED_M_S, CarParams
@@ -311,8 +313,8 @@ def _stress_parser(sub: Any) -> None:
 
 
 def cmd_stress(args: argparse.Namespace) -> int:
-    from tfalda_sim.cli_common import SweepSpec, read_results, resume_hint, run_sweep
     from tfalda_sim.outputs import Outputs
+    from tfalda_sim.sweep_runner import SweepSpec, read_results, resume_hint, run_sweep
 
     from .stress import (
         REPORT_FILES,
@@ -415,8 +417,8 @@ def _evaluate_agent_parser(sub: Any) -> None:
 
 
 def cmd_evaluate_agent(args: argparse.Namespace) -> int:
-    from tfalda_sim.cli_common import SweepSpec, read_results, resume_hint, run_sweep
     from tfalda_sim.outputs import Outputs
+    from tfalda_sim.sweep_runner import SweepSpec, read_results, resume_hint, run_sweep
 
     from .drive import check_agent
     from .evaluate import (

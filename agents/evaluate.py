@@ -18,8 +18,8 @@ import numpy as np
 from tqdm import tqdm
 
 from tfalda_sim.camera import load_camera
-from tfalda_sim.cli_common import consume
 from tfalda_sim.parallel import resolve_workers, stream
+from tfalda_sim.sweep_runner import consume
 from tfalda_sim.tracks import generate
 
 from .drive import check_agent, drive, make_agent

@@ -12,7 +12,6 @@ from pathlib import Path
 
 import pytest
 
-from tfalda_sim.cli_common import consume
 from tfalda_sim.interrupts import (
     deferring_stops,
     ignoring_stops,
@@ -20,6 +19,7 @@ from tfalda_sim.interrupts import (
     last_stop_signal,
     stop_signals_interrupt,
 )
+from tfalda_sim.sweep_runner import consume
 
 
 @pytest.fixture(autouse=True)
@@ -99,8 +99,8 @@ def test_a_ctrl_c_while_a_sweep_writes_a_result_keeps_that_result_whole(
     """A Ctrl-C landing between two lines of one result's side output (a track's frames
     in ``evaluate --jsonl``) stops the sweep after that result, with all its lines and
     its journal record, not in the middle of them."""
-    from tfalda_sim.cli_common import SweepSpec, run_sweep
     from tfalda_sim.parallel import Backend
+    from tfalda_sim.sweep_runner import SweepSpec, run_sweep
 
     spec = SweepSpec(command="demo", config={"seeds": "0:5"}, jobs=range(5), total=5,
                      fn=abs, record=lambda j, r: {"x": j}, check=lambda j, r: None)

@@ -29,7 +29,6 @@ import ray  # the ray extra: installed by `make install` and CI, so never skippe
 
 from tfalda_sim import parallel
 from tfalda_sim.cli import main
-from tfalda_sim.cli_common import SweepSpec, read_results, run_sweep
 from tfalda_sim.parallel import (
     IN_FLIGHT_PER_WORKER,
     Backend,
@@ -37,6 +36,7 @@ from tfalda_sim.parallel import (
     check_ray_address,
     ray_stream,
 )
+from tfalda_sim.sweep_runner import SweepSpec, read_results, run_sweep
 
 TIMING = {"detector_ms_median", "ms_per_frame_median", "ms_per_frame_p95", "times",
           "wall_time_s", "steps_per_s"}

@@ -18,28 +18,30 @@ from ..camera.command import add_camera_option, camera_input
 from ..cli_common import (
     DIRECTORY,
     CliError,
-    SweepEnd,
-    SweepSpec,
     add_force_option,
     add_json_option,
-    add_sweep_options,
     bounded_float_arg,
     bounded_int_arg,
     check_outputs,
-    check_sweep_options,
-    read_results,
-    resume_hint,
-    run_sweep,
     seed_range_arg,
     speed_arg_for,
-    sweep_backend,
-    sweep_exit,
 )
 from ..interrupts import holding_stops
 from ..perception import DetectorConfig, LaneObservation
 from ..perception.command import check_camera_geometry
 from ..perception.params import IMAGE_WIDTH_PX
 from ..rendering import FrameTruth, Renderer
+from ..sweep_runner import (
+    SweepEnd,
+    SweepSpec,
+    add_sweep_options,
+    check_sweep_options,
+    read_results,
+    resume_hint,
+    run_sweep,
+    sweep_backend,
+    sweep_exit,
+)
 from ..vehicle import MIN_CRUISE_SPEED_M_S, CarParams
 from .metrics import EPSILON_PX
 from .runner import WITH_LIS, WITHOUT_LIS, run_scenario
