@@ -4,9 +4,9 @@ rate and TuSimple-style scores, exports (XML of listing 4.1, JSON Lines), charts
 from .metrics import (
     EPSILON_PX,
     FrameScore,
+    dda_pixels,
     lane_hit_rates,
     score_frame,
-    segment_pixels,
     truth_distance,
 )
 from .runner import LOW_CONFIDENCE, WITH_LIS, WITHOUT_LIS, RunResult, run_scenario
@@ -16,5 +16,5 @@ from .trajectory import Trajectory
 
 __all__ = ["EPSILON_PX", "LOW_CONFIDENCE", "WITHOUT_LIS", "WITH_LIS", "FrameScore",
            "RunResult", "Scenario", "ScenarioKind", "Trajectory", "ablation_configs",
-           "generated_scenario", "lane_hit_rates", "pooled_summary", "run_scenario",
-           "run_seeds", "score_frame", "segment_pixels", "thesis_scenario", "truth_distance"]
+           "dda_pixels", "generated_scenario", "lane_hit_rates", "pooled_summary",
+           "run_scenario", "run_seeds", "score_frame", "thesis_scenario", "truth_distance"]

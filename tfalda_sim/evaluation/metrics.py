@@ -22,9 +22,11 @@ LANE_MARKINGS = (Marking.RIGHT_LINE, Marking.CENTRE_LINE, Marking.LEFT_LINE)
 the road's lines; start and stop lines run across and are left out)."""
 
 
-def segment_pixels(x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
-    """Integer pixels ``(N, 2)`` (x, y) of the segment, one per step of its longer axis,
-    ends included (the Bresenham rasterisation of section 4.1.7)."""
+def dda_pixels(x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
+    """Integer pixels ``(N, 2)`` (x, y) of the segment between the rounded ends: a DDA, one
+    sample per step of its longer axis, ends included, coordinates rounded half to even
+    (``np.rint``) — Bresenham's pixels up to ties (the rasterisation of section 4.1.7;
+    ``perception.candidates.integer_dda_pixels`` breaks ties away from zero)."""
     ax, ay, bx, by = (round(v) for v in (x0, y0, x1, y1))
     n = max(abs(bx - ax), abs(by - ay)) + 1
     t = np.arange(n) / max(n - 1, 1)
@@ -51,7 +53,7 @@ def lane_hit_rates(lanes: np.ndarray, distance: np.ndarray, epsilon_px: float = 
     for k, (x0, y0, x1, y1) in enumerate(np.asarray(lanes, dtype=np.float64)):
         if not np.all(np.isfinite((x0, y0, x1, y1))):
             continue  # a missing lane scores 0
-        px = segment_pixels(x0, y0, x1, y1)
+        px = dda_pixels(x0, y0, x1, y1)
         inside = (px[:, 0] >= 0) & (px[:, 0] < w) & (px[:, 1] >= 0) & (px[:, 1] < h)
         d = np.full(len(px), np.inf)
         d[inside] = distance[px[inside, 1], px[inside, 0]]

@@ -47,9 +47,11 @@ def line_offset(i: int, dx: int, n: int) -> int:
     return mag if dx >= 0 else -mag
 
 
-def segment_pixels(x0: int, x1: int, height: int) -> list[tuple[int, int]]:
-    """The pixels ``(x, y)`` of the segment from ``(x0, 0)`` to ``(x1, height − 1)``: one
-    per step of its longer axis, ends included (a DDA equal to Bresenham up to ties)."""
+def integer_dda_pixels(x0: int, x1: int, height: int) -> list[tuple[int, int]]:
+    """The pixels ``(x, y)`` of the segment from ``(x0, 0)`` to ``(x1, height − 1)``: an
+    integer DDA, one sample per step of its longer axis, ends included, offsets
+    ``line_offset`` (halves rounded away from zero) — the samples of a candidate segment,
+    Bresenham's pixels up to ties (``evaluation.metrics.dda_pixels`` rounds ties to even)."""
     dx, dy = x1 - x0, height - 1
     n = max(abs(dx), dy) + 1
     return [(x0 + line_offset(i, dx, n), line_offset(i, dy, n)) for i in range(n)]

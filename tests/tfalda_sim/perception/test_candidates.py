@@ -14,8 +14,8 @@ from tfalda_sim.perception.candidates import (
     candidates,
     choose_lane,
     distance_lambda,
+    integer_dda_pixels,
     preprocess,
-    segment_pixels,
     sobel_horizontal_edges,
 )
 from tfalda_sim.perception.params import EdgeMode
@@ -202,9 +202,9 @@ def test_all_dark_candidates_keep_the_listing_end_x_0() -> None:
     assert (p + d).tolist() == [0] * 7
 
 
-def test_segment_pixels_are_connected_and_end_at_both_points() -> None:
+def test_integer_dda_pixels_are_connected_and_end_at_both_points() -> None:
     for x0, x1, h in [(0, 9, 4), (5, 0, 10), (3, 3, 6), (0, 20, 21)]:
-        px = segment_pixels(x0, x1, h)
+        px = integer_dda_pixels(x0, x1, h)
         assert px[0] == (x0, 0) and px[-1] == (x1, h - 1)
         steps = np.abs(np.diff(np.array(px), axis=0))
         assert steps.max() <= 1 and np.all(steps.sum(axis=1) >= 1)
