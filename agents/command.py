@@ -321,7 +321,7 @@ def cmd_stress(args: argparse.Namespace) -> int:
         StressRun,
         StressTally,
         battery_jobs,
-        check_faults,
+        check_fault_names,
         check_run_record,
         markdown_table,
         plot,
@@ -332,7 +332,7 @@ def cmd_stress(args: argparse.Namespace) -> int:
 
     check_sweep_options(args)
     try:
-        faults = check_faults([f.strip() for f in args.faults.split(",") if f.strip()])
+        faults = check_fault_names([f.strip() for f in args.faults.split(",") if f.strip()])
     except ValueError as exc:
         raise CliError(str(exc)) from None
     # --resume replaces the report of the run it continues (and its --results file).

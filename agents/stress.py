@@ -214,8 +214,9 @@ def check_run_record(job: StressJob, rec: dict[str, Any]) -> None:
                          f"{sorted(f.name for f in fields(StressRun))}")
 
 
-def check_faults(faults: Sequence[str] | None) -> list[str]:
-    """The fault names to run (default: the whole battery); unknown names refused."""
+def check_fault_names(faults: Sequence[str] | None) -> list[str]:
+    """The names of the stress battery's faults to run (default: the whole battery);
+    unknown names refused (ValueError)."""
     names = list(FAULTS if faults is None else faults)
     unknown = [f for f in names if f not in FAULTS]
     if unknown or not names:
@@ -240,13 +241,14 @@ def iter_battery(seeds: Iterable[int], faults: Sequence[str] | None = None, *,
     """Every fault × {with, without the reset stage} × seed, streamed from a process pool
     of ``workers`` (``tfalda_sim.parallel.stream``: bounded memory for any range, results
     in job order and independent of the worker count)."""
-    yield from stream(run_job, battery_jobs(seeds, check_faults(faults), camera), workers=workers)
+    yield from stream(run_job, battery_jobs(seeds, check_fault_names(faults), camera),
+                      workers=workers)
 
 
 def run_battery(seeds: Sequence[int], faults: Sequence[str] | None = None, *,
                 workers: int = 1, progress: bool = False) -> list[StressRun]:
     """``iter_battery`` collected into a list (for small ranges), with a progress bar."""
-    names = check_faults(faults)
+    names = check_fault_names(faults)
     return list(tqdm(iter_battery(seeds, names, workers=workers),
                      total=len(seeds) * len(names) * 2, desc="stress", disable=not progress))
 
