@@ -320,7 +320,11 @@ TARGETS: tuple[Target, ...] = (
     Target("lanes env step ≥ 14× CarRacing-v3's (fixed track)", "bench_env",
            lambda r: (f"{ratio(r['envs'][FIXED]['ratio_to_car_racing'])} "
                       f"({ratio(r['envs'][GEN]['ratio_to_car_racing'])} on generated "
-                      "tracks)", r["envs"][FIXED]["ratio_to_car_racing"] >= 14.0)),
+                      "tracks)", r["envs"][FIXED]["ratio_to_car_racing"] >= 14.0),
+           lambda r: "the ratio depends on the host's CPU, which does not speed up "
+           "CarRacing-v3 (Box2D, pygame) and our step (numba kernels, OpenCV) alike: AMD "
+           "EPYC hosts read 15.5–16.6×, 2.8 GHz Xeon hosts 11.5–14.7× (this run: "
+           f"{r['machine']['cpu']})."),
     Target("a reset onto a new generated track ≤ 5 ms", "bench_env, bench_reset",
            None),  # two sources: filled in by ``targets``
     Target("steps on generated tracks ≥ 90 % of the fixed track's rate", "bench_env",
