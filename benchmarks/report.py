@@ -19,6 +19,7 @@ import json
 import math
 import subprocess
 import sys
+import textwrap
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -383,12 +384,12 @@ def targets(results: Mapping[str, Mapping]) -> str:
         rows.append([t.text, figure[0], met, t.source or "quoted"])
         if not figure[1] and t.unmet:
             why = t.unmet if isinstance(t.unmet, str) else t.unmet(results[t.source])
-            notes.append(f"- {t.text}: {why}")
+            notes.append(wrap(f"- {t.text}: {why}"))
     env = results["bench_env"]["machine"]
     out = table(["target", "current", "met?", "source"], rows, "llll")
     if notes:
-        out += (f"\n\nWhy the unmet ones are not met (on {env['cores']} cores of "
-                f"{env['cpu']}):\n\n" + "\n".join(notes))
+        out += "\n\n" + wrap(f"Why the unmet ones are not met (on {env['cores']} cores of "
+                             f"{env['cpu']}):") + "\n\n" + "\n".join(notes)
     return out
 
 
@@ -405,6 +406,8 @@ Current figures only, each from its benchmark script's `--json` output, stored i
 `benchmarks/results/` (history: `git log -p benchmarks/results/`). `make bench` reruns
 every benchmark and writes this page; `python benchmarks/report.py --run NAME` reruns
 one; `python benchmarks/report.py --check` says whether the page matches the results.
+The project's targets, and whether the current figures meet them: [Targets](#targets), at
+the end.
 
 How the figures are measured:
 
@@ -433,19 +436,31 @@ def load_results(reads: dict[str, set[tuple[str, ...]]] | None = None
     return out
 
 
+def wrap(text: str) -> str:
+    """A paragraph (or a bullet, ``- …``) wrapped at ``WIDTH``; code spans stay whole."""
+    indent = "  " if text.startswith("- ") else ""
+    return textwrap.fill(text, WIDTH, subsequent_indent=indent, break_long_words=False,
+                         break_on_hyphens=False)
+
+
+WIDTH = 90
+"""The page's prose is wrapped at this width (tables are not)."""
+
+
 def render(results: Mapping[str, Mapping]) -> str:
-    parts = [INTRO, "## Targets\n", targets(results), ""]
+    parts = [INTRO]
     for b in BENCHMARKS:
         r = results[b.name]
-        parts += [f"## {b.title} (`benchmarks/{b.name}.py`)\n", b.what, "",
+        parts += [f"## {b.title} (`benchmarks/{b.name}.py`)\n", wrap(b.what), "",
                   f"`python benchmarks/{b.name}.py {b.command(r)} --json`", "",
-                  host_line(r), "", b.body(r), ""]
+                  wrap(host_line(r)), "", b.body(r), ""]
     parts += ["## A/B scripts\n",
-              "These compare this checkout with other code in the same minutes (a speed-up "
-              "is only ever measured so); they have no standing figures: quote theirs "
-              "with the change they measure.", ""]
-    parts += [f"- `python benchmarks/{script} {args}`: {what}." for script, args, what
+              wrap("These compare this checkout with other code in the same minutes (a "
+                   "speed-up is only ever measured so); they have no standing figures: "
+                   "quote theirs with the change they measure."), ""]
+    parts += [wrap(f"- `python benchmarks/{script} {args}`: {what}.") for script, args, what
               in AB_SCRIPTS]
+    parts += ["", "## Targets\n", targets(results)]
     return "\n".join(parts).rstrip("\n") + "\n"
 
 
