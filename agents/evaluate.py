@@ -15,11 +15,9 @@ from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from tfalda_sim.camera import load_camera
-from tfalda_sim.parallel import resolve_workers, stream
-from tfalda_sim.sweep_runner import consume
+from tfalda_sim.parallel import stream
 from tfalda_sim.tracks import generate
 
 from .drive import check_agent, drive, make_agent
@@ -103,24 +101,3 @@ def summarise(runs: list[dict[str, Any]], speeds: tuple[float, ...]) -> list[dic
             "roi_resets_per_track": float(np.mean([r["roi_resets"] for r in group])),
         })
     return per_speed
-
-
-def evaluate(kind: str, seeds: range, *, laps: int = 3, speeds: tuple[float, ...] = (1.5,),
-             policy: str | None = None, workers: int | None = None, progress: bool = True,
-             camera: str = "thesis"
-             ) -> dict[str, Any]:
-    """Drive every seed at every speed; per speed the success rate and figures. A Ctrl-C
-    ends it early with the runs finished so far (``"interrupted": true``), as does a
-    worker that died (``"worker_died"``: the message)."""
-    jobs = len(seeds) * len(speeds)
-    n, _ = resolve_workers(workers, jobs)
-    runs: list[dict[str, Any]] = []
-    with tqdm(total=jobs, desc=kind, disable=not progress) as bar:
-        def keep(run: dict[str, Any]) -> None:
-            runs.append(run)
-            bar.update()
-
-        end = consume(iter_evaluate(kind, seeds, laps=laps, speeds=speeds, policy=policy,
-                                    workers=n, camera=camera), keep)
-    return result_document(kind, policy, camera, laps, seeds, speeds, runs, end.interrupted,
-                           end.worker_died)

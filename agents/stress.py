@@ -30,7 +30,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from tfalda_sim.envs import TfaldaTrackEnv
 from tfalda_sim.faults import (
@@ -243,14 +242,6 @@ def iter_battery(seeds: Iterable[int], faults: Sequence[str] | None = None, *,
     in job order and independent of the worker count)."""
     yield from stream(run_job, battery_jobs(seeds, check_fault_names(faults), camera),
                       workers=workers)
-
-
-def run_battery(seeds: Sequence[int], faults: Sequence[str] | None = None, *,
-                workers: int = 1, progress: bool = False) -> list[StressRun]:
-    """``iter_battery`` collected into a list (for small ranges), with a progress bar."""
-    names = check_fault_names(faults)
-    return list(tqdm(iter_battery(seeds, names, workers=workers),
-                     total=len(seeds) * len(names) * 2, desc="stress", disable=not progress))
 
 
 @dataclass

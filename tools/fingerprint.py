@@ -20,14 +20,10 @@ from typing import Any
 
 import numpy as np
 
-try:  # the installed namespace (issue 16) …
-    from tfalda_sim.tracks import generate, load_named
-except ImportError:  # … or the top-level packages before it
-    from tfalda_sim.tracks import generate, load_named  # type: ignore[no-redef]
-
+from tfalda_sim.tracks import generate, load_named
 
 _FIRST_NAMES = {"roi_reset": "lis_reset", "roi_resets": "lis_resets"}
-"""Names renamed since the first fingerprints (issue 16), hashed under the first name so
+"""Names renamed since the first fingerprints, hashed under the first name so
 digests stay comparable across the rename."""
 
 
@@ -126,12 +122,8 @@ def rollouts() -> dict[str, str]:
 def drive() -> dict[str, str]:
     from dataclasses import replace
 
-    try:
-        from tfalda_sim.agents.drive import drive as run_drive
-        from tfalda_sim.agents.pid import LanePid
-    except ImportError:
-        from tfalda_sim.agents.drive import drive as run_drive  # type: ignore[no-redef]
-        from tfalda_sim.agents.pid import LanePid  # type: ignore[no-redef]
+    from tfalda_sim.agents.drive import drive as run_drive
+    from tfalda_sim.agents.pid import LanePid
     track = replace(generate(7), obstacles=())
     res = run_drive(LanePid(), track, laps=1, max_steps=300)
     s = res.summary()

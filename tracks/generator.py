@@ -101,9 +101,6 @@ class GeneratorParams:
                 f"radius_m starts at {self.radius_m[0]} m, below the rules' minimum "
                 f"{rules.min_centre_radius_m(self.lane_width_m):.3f} m for this lane width")
 
-    def with_difficulty(self, difficulty: float) -> GeneratorParams:
-        return replace(self, difficulty=difficulty)
-
 
 @dataclass(frozen=True)
 class _Polygon:

@@ -212,34 +212,6 @@ def project(
 
 
 @njit(cache=True)
-def local_coordinates(
-    x0: float, y0: float, h0: float, kappa: float, px: float, py: float
-) -> tuple[float, float]:
-    """Unclamped ``(u [m], d [m])`` of a point w.r.t. the segment's straight line or circle.
-
-    For an arc, ``u`` is in ``[0, 2π·R)``; callers decide whether it lies on the segment.
-    """
-    if kappa == 0.0:
-        c = math.cos(h0)
-        s = math.sin(h0)
-        dx = px - x0
-        dy = py - y0
-        return dx * c + dy * s, -dx * s + dy * c
-    inv = 1.0 / kappa
-    sign = 1.0 if kappa > 0.0 else -1.0
-    radius = abs(inv)
-    cx = x0 - math.sin(h0) * inv
-    cy = y0 + math.cos(h0) * inv
-    vx = px - cx
-    vy = py - cy
-    r = math.hypot(vx, vy)
-    phi0 = math.atan2(y0 - cy, x0 - cx)
-    phi = math.atan2(vy, vx)
-    delta = (sign * (phi - phi0)) % TWO_PI
-    return delta * radius, sign * (radius - r)
-
-
-@njit(cache=True)
 def extreme_sample_indices(s0: np.ndarray, length: np.ndarray, h0: np.ndarray,
                            kappa: np.ndarray, delta_m: float, n_samples: int) -> np.ndarray:
     """Sorted indices of the samples ``i · delta_m`` (``0 ≤ i < n_samples``) within 3 of a

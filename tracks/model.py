@@ -56,11 +56,6 @@ class Line(Enum):
     CENTRE = "centre"
     RIGHT = "right"
 
-    @property
-    def offset_factor(self) -> int:
-        """Lateral position of the line's centre in lane widths (left = +1)."""
-        return {Line.LEFT: 1, Line.CENTRE: 0, Line.RIGHT: -1}[self]
-
 
 class Lane(Enum):
     """A lane of the road; ``OFF_ROAD`` for points outside both side lines."""

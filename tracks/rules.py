@@ -465,8 +465,3 @@ def validate_elements(track: Track) -> list[Violation]:
     line): for a track whose geometry and intersections ``validate`` already passed, its
     result is ``validate``'s (the generator adds elements to a valid road)."""
     return [*_check_gaps(track), *_check_obstacles(track), *_check_start_line(track)]
-
-
-def is_valid(track: Track) -> bool:
-    """True when ``validate(track)`` finds nothing."""
-    return not validate(track)

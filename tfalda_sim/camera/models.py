@@ -181,12 +181,6 @@ class Camera:
             t = np.where(rays[:, 2] < -1e-9, -pos[2] / rays[:, 2], np.nan)
         return np.column_stack([pos[0] + t * rays[:, 0], pos[1] + t * rays[:, 1]])
 
-    def pixel_rays_car(self) -> np.ndarray:
-        """Unit ray of every pixel centre in the car frame, ``(height, width, 3)``."""
-        v, u = np.mgrid[0:self.height, 0:self.width].astype(np.float64)
-        rays = self.unproject(np.column_stack([u.ravel(), v.ravel()]))
-        return (rays @ self.mount.rotation()).reshape(self.height, self.width, 3)
-
 
 @dataclass(frozen=True, eq=False)
 class FisheyeCamera(Camera):

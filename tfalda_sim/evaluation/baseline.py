@@ -20,7 +20,8 @@ line segments in image pixels:
 - **compute time**: wall-clock time of the detector alone per frame [ms] (TFALDA + LIS:
   the thesis pipeline on the full frame; Hough: the seed's steps), in the same process.
 
-``compare`` runs the thesis' scenarios and generated tracks (seeds in a process pool);
+``iter_compare`` runs the thesis' scenarios and generated tracks (seeds in a process
+pool), ``CompareTally`` pools them;
 ``tfalda-sim compare`` prints the table, ``--json``, and writes JSON, Markdown and a PNG.
 """
 
@@ -33,11 +34,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from ..camera import Camera, load_camera
 from ..histogram import TimeHistogram
-from ..parallel import resolve_workers, stream
+from ..parallel import stream
 from ..perception import DetectorConfig, HoughConfig, HoughDetector, LaneObservation
 from ..perception.hough import SIMULATOR_BINARISE_LEVEL
 from ..perception.params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX, INITIAL_ROIS, is_thesis_camera
@@ -363,24 +363,6 @@ def iter_compare(thesis: Sequence[str], seeds: Iterable[int], *,
     """(group, tallies) per job, streamed from ``workers`` processes in job order;
     ``camera`` a profile name or file."""
     yield from stream(_one, compare_jobs(thesis, seeds, max_frames, camera), workers=workers)
-
-
-def compare(thesis: Sequence[str] = ("straight", "curve", "track"),
-            seeds: Sequence[int] = range(10000, 10010), *, max_frames: int | None = None,
-            workers: int | None = None, progress: bool = False) -> dict[str, Any]:
-    """The thesis scenarios (each its own group) and the generated tracks ``seeds`` (one
-    lap each, pooled as "generated"), every detector on the same frames."""
-    jobs = len(thesis) + len(seeds)
-    if not jobs:
-        raise ValueError("nothing to compare: give thesis scenarios or seeds")
-    workers, _ = resolve_workers(workers, jobs)
-    tally = CompareTally()
-    for group, tallies in tqdm(iter_compare(thesis, seeds, max_frames=max_frames,
-                                            workers=workers),
-                               total=jobs, desc="scenarios", unit="scenario",
-                               disable=not progress):
-        tally.add(group, tallies)
-    return tally.result(thesis, seeds, max_frames)
 
 
 def markdown_table(result: Mapping[str, Any]) -> str:

@@ -11,10 +11,6 @@ from .hough import HoughConfig
 from .params import DetectorConfig
 
 
-def register(sub: object) -> None:
-    """No ``tfalda-sim`` command of its own."""
-
-
 def check_camera_geometry(text: str) -> Camera:
     """The camera of ``--camera``, refused (``CliError``) when either detector's layout
     cannot be derived for it (it does not see the lane)."""
