@@ -1,4 +1,5 @@
-"""Shared fixtures: generated tracks are cached per session (generation is deterministic)."""
+"""Shared fixtures: generated tracks are cached for the whole test run (generation is
+deterministic)."""
 
 from __future__ import annotations
 

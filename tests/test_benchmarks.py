@@ -21,8 +21,8 @@ BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
 def run_json(script: str, *args: str) -> dict:
-    """``script``'s ``--json`` output with ``args`` (run once per arguments in a test
-    session: the page's schema test and the script's own test share a run)."""
+    """``script``'s ``--json`` output with ``args`` (run once per arguments in a pytest
+    run: the page's schema test and the script's own test share a run)."""
     return copy.deepcopy(_run_json(script, args))
 
 

@@ -1,4 +1,4 @@
-"""Issue 17.6(b): the thesis' three scenarios run with the two untried explanations of its
+"""The thesis' three scenarios run with the two untried explanations of its
 unreproduced curve behaviour — listing A.2's one-frame-late ROI placement
 (``LisConfig.roi_from_current_lanes=False``) and a camera whose upper-left ROI also sees
 the opposite lane's outer line — each alone and both, with and without the LIS.

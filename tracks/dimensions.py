@@ -61,10 +61,12 @@ MAT_EDGE_MARGIN_M: float = 0.300
 """Distance of the road from the edge of the mat [m]. Rules: ≥ 300 mm."""
 
 CLOSURE_TOLERANCE_M: float = 0.001
-"""A closed loop's end must meet its start within this distance [m]. Issue 2: 1 mm."""
+"""A closed loop's end must meet its start within this distance [m] (the tracks'
+specification: 1 mm)."""
 
 CLOSURE_TOLERANCE_RAD: float = math.radians(0.1)
-"""A closed loop's end heading must match its start within this angle [rad]. Issue 2: 0.1°."""
+"""A closed loop's end heading must match its start within this angle [rad] (the
+tracks' specification: 0.1°)."""
 
 INTERSECTION_ANGLE_TOLERANCE_RAD: float = math.radians(1.0)
 """Allowed deviation of an intersection from a right angle [rad]. *Ours*; rules: right-angled."""

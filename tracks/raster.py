@@ -34,7 +34,7 @@ MAX_MAP_PIXELS: int = 400_000_000
 default 4 mm/px, four times the largest generated track's."""
 
 DEFAULT_RESOLUTION_M: float = 0.004
-"""Default edge of a map pixel [m] (issue 2: at most 4 mm)."""
+"""Default edge of a map pixel [m] (the tracks' specification: at most 4 mm)."""
 
 CHUNK_M: float = 0.75
 """Road is painted in chunks of at most this length [m], each in its own pixel box (the
@@ -42,7 +42,7 @@ map does not depend on it: tested). A tile meets fewer chunks of longer ones, ea
 its rows' spans to find; longer ones bulge more on arcs and leave the plain path (no
 ``_paint_pixel``) over more road near gaps and crossing markings: 0.75 m painted a view's
 tiles 9–15 % faster than 0.25 m in three runs, 0.5 m and 1 m less consistently
-(twentieth session, BENCHMARKS.md)."""
+(BENCHMARKS.md)."""
 
 VIRTUAL: int = 0x80
 """Label bit: the marking runs here but is not painted (dash gap or rule gap)."""

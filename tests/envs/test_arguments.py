@@ -1,5 +1,5 @@
 """TfaldaTrack-v0's constructor arguments and reset options: the right type or a TypeError /
-ValueError naming the argument, what was given and what is accepted (issue 15, defect 9)."""
+ValueError naming the argument, what was given and what is accepted."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Property tests: any reset options and any action either work or raise TypeError /
-ValueError, never another exception (issue 15). The envs are built once per module and
+ValueError, never another exception. The envs are built once per module and
 reused across examples, on the cheap "oval" track."""
 
 from __future__ import annotations

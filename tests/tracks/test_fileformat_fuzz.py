@@ -1,4 +1,4 @@
-"""Property-based fuzzing of track files (issue 15, defect 6).
+"""Property-based fuzzing of track files.
 
 Property: ``load_track(path)`` returns a ``Track`` or raises ``TrackFileError`` — never
 another exception — and each file is answered quickly. Inputs start from valid track

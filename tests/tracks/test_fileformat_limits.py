@@ -1,4 +1,4 @@
-"""Hostile track files (issue 15, defect 6): every limit is checked before anything
+"""Hostile track files: every limit is checked before anything
 proportional to the size is allocated, and refused with an error that names the file,
 the field and the limit; never a traceback, never gigabytes, never minutes."""
 

@@ -11,7 +11,8 @@ from tfalda_sim.tracks import Arc, GeneratorParams, generate, validate
 
 
 def test_ten_thousand_consecutive_seeds_give_valid_tracks() -> None:
-    # Issue 2's acceptance criterion, run in full (about a minute on 2 cores).
+    # The generator's acceptance criterion (every seed gives a valid track), run in full
+    # (about a minute on 2 cores).
     bad = [seed for seed in range(10_000) if validate(generate(seed))]
     assert bad == []
 

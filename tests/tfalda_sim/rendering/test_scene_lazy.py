@@ -1,4 +1,4 @@
-"""Lazy scenes (issue 18): the marking map and its mip levels are filled tile by tile as
+"""Lazy scenes: the marking map and its mip levels are filled tile by tile as
 the renderer looks at them, and every frame equals the eager scene's bit for bit."""
 
 from __future__ import annotations
