@@ -208,8 +208,9 @@ def env_body(r: Mapping) -> str:
     ceiling = r["ratios"].get(CEILING)
     if ceiling is not None and ceiling < BUSY_CEILING:
         out += ["", f"**A busy host**: two single-env processes at once made only "
-                f"{num(ceiling)}× one process's steps/s in this run, so other work shared "
-                "the cores; the vector figures of this run say little about the code."]
+                f"{num(ceiling)}× one process's steps/s in this run, so other work (on the "
+                "VM or its host) shared the cores; the vector figures of this run say "
+                "little about the code."]
     return "\n".join(out)
 
 
@@ -322,10 +323,9 @@ TARGETS: tuple[Target, ...] = (
            lambda r: (f"{ratio(r['envs'][FIXED]['ratio_to_car_racing'])} "
                       f"({ratio(r['envs'][GEN]['ratio_to_car_racing'])} on generated "
                       "tracks)", r["envs"][FIXED]["ratio_to_car_racing"] >= 14.0),
-           lambda r: "the ratio depends on the host's CPU, which does not speed up "
-           "CarRacing-v3 (Box2D, pygame) and our step (numba kernels, OpenCV) alike: AMD "
-           "EPYC hosts read 15.5–16.6×, 2.8 GHz Xeon hosts 11.5–14.7× (this run: "
-           f"{r['machine']['cpu']})."),
+           "the ratio depends on the host's CPU, which does not speed up CarRacing-v3 "
+           "(Box2D, pygame) and our step (numba kernels, OpenCV) alike: AMD EPYC hosts "
+           "read 15.5–16.6×, Xeon hosts 11.5–14.7×."),
     Target("a reset onto a new generated track ≤ 5 ms", "bench_env, bench_reset",
            None),  # two sources: filled in by ``targets``
     Target("steps on generated tracks ≥ 90 % of the fixed track's rate", "bench_env",
