@@ -207,10 +207,10 @@ def env_body(r: Mapping) -> str:
            table(["ratio (same run)", "value"], ratios)]
     ceiling = r["ratios"].get(CEILING)
     if ceiling is not None and ceiling < BUSY_CEILING:
-        out += ["", f"**A busy host**: two single-env processes at once made only "
+        out += ["", wrap(f"**A busy host**: two single-env processes at once made only "
                 f"{num(ceiling)}× one process's steps/s in this run, so other work (on the "
                 "VM or its host) shared the cores; the vector figures of this run say "
-                "little about the code."]
+                "little about the code.")]
     return "\n".join(out)
 
 
