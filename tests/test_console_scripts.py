@@ -21,7 +21,6 @@ import sys
 import time
 import zipfile
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -29,14 +28,17 @@ import cv2
 import numpy as np
 import pytest
 
-from tests.cli_helpers import command_tree, leaf_commands
+from tests.cli_helpers import (
+    SCRIPT,
+    TIMEOUT_S,
+    Run,
+    child_env,
+    command_tree,
+    default_sigint,
+    leaf_commands,
+    tfalda,
+)
 from tfalda_sim.tracks import NAMED_TRACKS, load_track
-
-SCRIPT: str | None = shutil.which("tfalda-sim", path=str(Path(sys.executable).parent))
-"""The console script of the interpreter running the tests (None: not installed)."""
-
-TIMEOUT_S = 300.0
-"""Hard limit per command (each takes seconds; a hang must not stall CI)."""
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -52,54 +54,6 @@ def covers(*command: str) -> Callable[[F], F]:
         COVERED[command] = fn.__name__
         return fn
     return register
-
-
-@dataclass(frozen=True)
-class Run:
-    argv: tuple[str, ...]
-    code: int
-    out: str
-    err: str
-
-    def __str__(self) -> str:
-        return (f"tfalda-sim {' '.join(self.argv)} → exit {self.code}\n"
-                f"--- stdout\n{self.out[-3000:]}\n--- stderr\n{self.err[-3000:]}")
-
-    def json(self) -> dict[str, Any]:
-        try:
-            doc = json.loads(self.out)
-        except json.JSONDecodeError as exc:
-            pytest.fail(f"stdout is not one JSON object ({exc})\n{self}")
-        assert isinstance(doc, dict), str(self)
-        return doc
-
-
-def _child_env() -> dict[str, str]:
-    env = dict(os.environ)
-    env.pop("TFALDA_SIM_DEBUG", None)  # the one-line "internal error" users see
-    return env
-
-
-def _default_sigint() -> None:
-    # CI may start the tests with SIGINT ignored, which a child inherits.
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
-def tfalda(*argv: str | Path, cwd: Path, code: int = 0) -> Run:
-    """Run the console script with ``argv`` in ``cwd``; assert it exits with ``code``
-    and prints neither a traceback nor an internal error."""
-    if SCRIPT is None:
-        pytest.fail(f"no tfalda-sim console script next to {sys.executable}: the package's "
-                    "[project.scripts] entry point is not installed")
-    args = tuple(str(a) for a in argv)
-    proc = subprocess.run([SCRIPT, *args], cwd=cwd, env=_child_env(), capture_output=True,
-                          text=True, timeout=TIMEOUT_S, check=False,
-                          preexec_fn=_default_sigint)
-    run = Run(args, proc.returncode, proc.stdout, proc.stderr)
-    assert "Traceback" not in run.err, str(run)
-    assert "internal error" not in run.err, str(run)
-    assert run.code == code, str(run)
-    return run
 
 
 def assert_png(path: Path, shape: tuple[int, ...] | None = None) -> None:
@@ -447,7 +401,7 @@ def test_a_killed_sweep_leaves_its_journal_and_resumes_from_it(tmp_path: Path) -
     sweep = ("evaluate", "--scenario", "random", "--seeds", "0:8", "--max-frames", "25",
              "--json", "--workers", "2")
     proc = subprocess.Popen([SCRIPT, *sweep, "--results", "r.jsonl"], cwd=tmp_path,
-                            env=_child_env(), stdout=subprocess.DEVNULL,
+                            env=child_env(), stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
     journal = tmp_path / "r.jsonl.partial"
     deadline = time.monotonic() + TIMEOUT_S
@@ -494,9 +448,9 @@ def test_a_sweep_on_ray_stopped_by_ctrl_c_resumes_to_the_uninterrupted_result(
     sweep = ("evaluate", "--scenario", "random", "--seeds", "0:8", "--max-frames", "25",
              "--json")
     proc = subprocess.Popen([SCRIPT, *sweep, "--backend", "ray", "--workers", "2",
-                             "--results", "r.jsonl"], cwd=tmp_path, env=_child_env(),
+                             "--results", "r.jsonl"], cwd=tmp_path, env=child_env(),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=_default_sigint)
+                            preexec_fn=default_sigint)
     deadline = time.monotonic() + TIMEOUT_S
     while time.monotonic() < deadline and proc.poll() is None:
         journal = tmp_path / "r.jsonl.partial"

@@ -11,6 +11,7 @@ An unexpected error (a bug) also exits 1, with one line naming it.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import signal
 import sys
@@ -193,3 +194,24 @@ def add_force_option(parser: argparse.ArgumentParser,
                      what: str = "existing output files") -> None:
     """``--force``: outputs that exist are replaced (refused without it)."""
     parser.add_argument("--force", action="store_true", help=f"overwrite {what}")
+
+
+def strict_json(value: object) -> object:
+    """``value`` with every non-finite float (NaN, ±inf; numpy's too) as None: JSON has no
+    NaN or Infinity (RFC 8259), and a strict parser refuses Python's ``NaN``. numpy scalars
+    and arrays become plain numbers and lists."""
+    if isinstance(value, Mapping):
+        return {key: strict_json(item) for key, item in value.items()}
+    if isinstance(value, list | tuple):
+        return [strict_json(item) for item in value]
+    if hasattr(value, "tolist") and not isinstance(value, str | bytes):  # numpy
+        return strict_json(value.tolist())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def json_text(value: object, **dumps_kwargs: object) -> str:
+    """A command's ``--json`` output: strict JSON (``strict_json``; ``json.dumps`` refuses
+    anything else rather than print it)."""
+    return json.dumps(strict_json(value), allow_nan=False, **dumps_kwargs)  # type: ignore[arg-type]
