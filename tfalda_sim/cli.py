@@ -10,7 +10,9 @@ invalid track, laps not completed), 2 bad input, 130 stopped by Ctrl-C.
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
+import io
 import os
 import signal
 import sys
@@ -37,11 +39,78 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _ClosedStdout(io.TextIOBase):
+    """``sys.stdout`` when the caller closed descriptor 1 (``>&-``): the first write fails as
+    a write to a pipe whose reader has gone, so the command stops on the path of ``| head``
+    (quietly, exit 1) — its result reaches no one. Descriptor 1 itself is /dev/null."""
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, text: str) -> int:
+        if text:
+            raise BrokenPipeError(errno.EPIPE, "stdout is closed")
+        return 0
+
+    def fileno(self) -> int:
+        return 1
+
+
+def _fill_closed_std_streams() -> None:
+    """Python sets ``sys.stdout``/``sys.stderr`` to None when the descriptor is closed at
+    start (``>&-``, ``2>&-``), and the next file opened would take that free descriptor —
+    anything then written to "stdout" (a child's, a C library's) would go into that file.
+    /dev/null takes the descriptor instead; stdout's writes then fail like a broken pipe,
+    stderr's are dropped (its messages have nowhere to go; the exit code still says)."""
+    for fd, name in ((0, "stdin"), (1, "stdout"), (2, "stderr")):
+        if getattr(sys, name) is not None:
+            continue
+        try:
+            os.fstat(fd)
+        except OSError:
+            null = os.open(os.devnull, os.O_RDWR)
+            if null != fd:
+                os.dup2(null, fd)
+                os.close(null)
+        if name == "stdout":
+            sys.stdout = _ClosedStdout()
+        elif name == "stderr":
+            sys.stderr = open(fd, "w", closefd=False)
+        else:
+            sys.stdin = open(fd, closefd=False)
+
+
+def _silence_std_streams() -> None:
+    """stdout or stderr gone (a closed pipe): both to /dev/null, so that neither the rest of
+    the run nor the interpreter's final flush writes to them again."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            os.dup2(devnull, stream.fileno())
+        except (AttributeError, OSError, ValueError):
+            pass  # not a descriptor (a test's capture): nothing reaches a terminal
+    os.close(devnull)
+
+
+def _say(line: str) -> None:
+    """One line on stderr; nothing if stderr is a closed pipe (the exit code still says)."""
+    try:
+        print(line, file=sys.stderr, flush=True)
+    except OSError:
+        _silence_std_streams()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one command and return its exit code (``tfalda_sim.cli_common``); a bad
     argument is reported with the usage and returns 2 (``--help`` returns 0)."""
+    _fill_closed_std_streams()
     with stop_signals_interrupt():  # SIGTERM and SIGHUP take Ctrl-C's clean path
-        return _run(argv)
+        try:
+            return _run(argv)
+        except BrokenPipeError:
+            # A message of the handlers below (a Ctrl-C's) met a closed stderr.
+            _silence_std_streams()
+            return EXIT_NEGATIVE
 
 
 def _run(argv: Sequence[str] | None) -> int:
@@ -60,7 +129,7 @@ def _run(argv: Sequence[str] | None) -> int:
                                "of them were kept")
         return code
     except (CliError, OutputError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        _say(f"error: {exc}")
         return EXIT_BAD_INPUT
     except SystemExit as exc:  # a handler's parser.error(): usage and message printed
         return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
@@ -71,21 +140,18 @@ def _run(argv: Sequence[str] | None) -> int:
     except BrokenPipeError:
         # stdout or stderr closed by its reader (`… | head`): stop quietly. What was
         # committed before stays; the result did not all reach the reader: exit 1.
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        os.dup2(devnull, sys.stderr.fileno())
+        _silence_std_streams()
         return EXIT_NEGATIVE
     except OSError as exc:
-        print(f"error: {exc.strerror or exc}"
-              + (f": {exc.filename}" if exc.filename else ""), file=sys.stderr)
+        _say(f"error: {exc.strerror or exc}" + (f": {exc.filename}" if exc.filename else ""))
         return EXIT_BAD_INPUT
     except Exception as exc:  # a bug: one line, the traceback on demand
         if is_interrupt(exc):  # a Ctrl-C that numba reported as a SystemError
             return interrupted("nothing written")
         if os.environ.get("TFALDA_SIM_DEBUG"):
             raise
-        print(f"internal error: {type(exc).__name__}: {exc} (set TFALDA_SIM_DEBUG=1 for the "
-              "traceback and please report it)", file=sys.stderr)
+        _say(f"internal error: {type(exc).__name__}: {exc} (set TFALDA_SIM_DEBUG=1 for the "
+             "traceback and please report it)")
         return EXIT_NEGATIVE
 
 
