@@ -30,9 +30,22 @@ imported by ``build_parser``, inside ``main``'s error handling (numba, OpenCV an
 rest take most of a second to import: a Ctrl-C then must not print a traceback)."""
 
 
+def _version() -> str:
+    """The installed distribution's version (its metadata is what pip and bug reports see);
+    the package's own ``__version__`` when run from a tree that is not installed."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("tfalda-sim")
+    except PackageNotFoundError:
+        from . import __version__
+        return __version__
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="tfalda-sim", description="Carolo-Cup lane-keeping simulator (tfalda-sim).")
+    parser.add_argument("--version", action="version", version=f"tfalda-sim {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
     for name in COMMAND_MODULES:
         importlib.import_module(f"tfalda_sim.{name}").register(sub)

@@ -127,3 +127,15 @@ def test_render_refuses_a_legal_but_unrenderable_track(tmp_path: Path,
                        str(tmp_path / "f.png"))
     assert code == 2 and "cannot render this track" in err and "too large" in err
     assert not (tmp_path / "f.png").exists()
+
+
+def test_version_through_the_console_script(tmp_path: Path) -> None:
+    from importlib.metadata import version
+
+    from tests.cli_helpers import tfalda
+
+    run = tfalda("--version", cwd=tmp_path)
+    assert run.out == f"tfalda-sim {version('tfalda-sim')}\n" and run.err == ""
+    import tfalda_sim
+
+    assert tfalda_sim.__version__ == version("tfalda-sim")
