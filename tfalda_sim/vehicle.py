@@ -72,12 +72,66 @@ class CarParams:
         return [(back, -half), (front, -half), (front, half), (back, half)]
 
 
-def servo_step(steer_rad: float, command_rad: float, dt_s: float, car: CarParams) -> float:
+SERVO_PWM_PERIOD_S: float = 0.020
+"""Period of a hobby servo's control pulse [s]: 50 Hz, one new target per 20 ms (the RC
+servo PWM convention: a 1–2 ms pulse repeated every 20 ms)."""
+
+SERVO_DEAD_BAND_US: float = 5.0
+"""Dead band of a standard analog servo [µs of pulse width] (the MG995 datasheet's "dead
+band width 5 µs"): a command nearer the current position than this moves nothing."""
+
+SERVO_HALF_RANGE_US: float = 500.0
+"""Pulse width from centre to a full deflection [µs] (1500 ± 500 µs)."""
+
+
+@dataclass(frozen=True)
+class ServoParams:
+    """The steering servo beyond its rate limit (``CarParams.max_steer_rate_rad_s``):
+    a first-order lag of its target behind the command and a dead band. The default is
+    an ideal servo (no lag, no dead band); ``REAL_SERVO`` is a hobby servo's."""
+
+    lag_s: float = 0.0
+    """Time constant of the target following the command [s] (0: none)."""
+    dead_band_rad: float = 0.0
+    """Wheel-angle error the servo does not correct [rad] (0: none)."""
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not (
+                    math.isfinite(value) and value >= 0):
+                raise ValueError(f"ServoParams.{f.name} must be finite and ≥ 0, got "
+                                 f"{value!r}")
+
+
+REAL_SERVO = ServoParams(
+    lag_s=SERVO_PWM_PERIOD_S,
+    dead_band_rad=MAX_STEER_RAD * SERVO_DEAD_BAND_US / SERVO_HALF_RANGE_US)
+"""A hobby servo: it takes a new target once per pulse period (modelled as a first-order
+lag of that time constant) and ignores errors within its dead band (5 µs of a 500 µs half
+range, scaled to the wheel's full angle)."""
+
+
+def servo_step(steer_rad: float, command_rad: float, dt_s: float, car: CarParams,
+               dead_band_rad: float = 0.0) -> float:
     """The wheel angle [rad] after ``dt_s`` of the servo moving from ``steer_rad`` towards
-    ``command_rad`` (clipped to the steering range) at its limited rate."""
+    ``command_rad`` (clipped to the steering range) at its limited rate; within
+    ``dead_band_rad`` of the target it does not move."""
     target = min(max(command_rad, -car.max_steer_rad), car.max_steer_rad)
+    if dead_band_rad > 0.0 and abs(target - steer_rad) <= dead_band_rad:
+        return steer_rad
     step = car.max_steer_rate_rad_s * dt_s
     return steer_rad + min(max(target - steer_rad, -step), step)
+
+
+def servo_target_step(target_rad: float, command_rad: float, dt_s: float,
+                      lag_s: float) -> float:
+    """The servo's target [rad] after ``dt_s`` of following ``command_rad`` with a
+    first-order lag of time constant ``lag_s`` (exact for a command held over the step;
+    0: the command at once)."""
+    if lag_s <= 0.0:
+        return command_rad
+    return command_rad + (target_rad - command_rad) * math.exp(-dt_s / lag_s)
 
 
 def motor_step(speed_m_s: float, throttle: float, dt_s: float, car: CarParams) -> float:
