@@ -39,6 +39,9 @@ from .mount import (
     CameraMount,
 )
 
+MIN_IMAGE_SIDE_PX: int = 16
+"""Smallest image width or height accepted [px]."""
+
 MAX_IMAGE_SIDE_PX: int = 8192
 """Largest image width or height accepted [px] (per-pixel tables are built per camera)."""
 
@@ -107,9 +110,9 @@ class Camera:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
                 raise TypeError(f"image {name} must be an integer [px], got {value!r}")
-            if not 16 <= value <= MAX_IMAGE_SIDE_PX:
-                raise ValueError(f"image {name} must be in [16, {MAX_IMAGE_SIDE_PX}] px, got "
-                                 f"{value}")
+            if not MIN_IMAGE_SIDE_PX <= value <= MAX_IMAGE_SIDE_PX:
+                raise ValueError(f"image {name} must be in [{MIN_IMAGE_SIDE_PX}, "
+                                 f"{MAX_IMAGE_SIDE_PX}] px, got {value}")
         if not (-self.width <= self.K[0, 2] <= 2 * self.width
                 and -self.height <= self.K[1, 2] <= 2 * self.height):
             raise ValueError(f"principal point ({self.K[0, 2]:g}, {self.K[1, 2]:g}) px is far "

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -47,7 +48,14 @@ import yaml
 
 from ..fileio import atomic_write
 from .bonnet import Bonnet
-from .models import Camera, FisheyeCamera, LensModel, PinholeCamera
+from .models import (
+    MAX_IMAGE_SIDE_PX,
+    MIN_IMAGE_SIDE_PX,
+    Camera,
+    FisheyeCamera,
+    LensModel,
+    PinholeCamera,
+)
 from .mount import CameraMount
 
 PROFILE_FORMAT: str = "tfalda-sim-camera/1"
@@ -342,44 +350,104 @@ def save_camera(camera: Camera, path: str | os.PathLike[str],
 
 
 # --------------------------------------------------------------------------- calibrations
+MAX_OPENCV_MATRIX_SIDE: int = 16
+"""Most rows or columns of a matrix read from an OpenCV file [1]: a camera matrix is 3×3,
+distortion at most 14 coefficients (OpenCV's largest model); a larger size is a broken file
+and would make OpenCV allocate it before any check."""
+
+_OPENCV_FIX = ("a truncated or hand-edited file? Write it again with cv2.FileStorage (as "
+               "OpenCV's calibration sample does) or give a tfalda-sim profile")
+
+
+def _opencv_reason(exc: BaseException) -> str:
+    """OpenCV's own words for a failed read, without its source path: "line N: what" for
+    a parse error. OpenCV's Python binding raises a parse error in a constructor as a
+    ``SystemError`` whose cause is the ``cv2.error``."""
+    if isinstance(exc, SystemError) and exc.__cause__ is not None:
+        exc = exc.__cause__
+    text = str(exc).strip()
+    parse = re.search(r"in function '[^']*\((\d+)\): ([^']*)'", text)
+    if parse:
+        return f"line {parse.group(1)}: {parse.group(2).strip()}"
+    what = re.search(r"error: \(-?\d+:[^)]*\) (.*?) in function", text, re.S)
+    if what:
+        return what.group(1).strip()
+    return text.splitlines()[-1] if text else "unreadable"
+
+
 def _opencv_intrinsics(path: Path, lens: LensModel | None) -> Intrinsics:
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_FORMAT_AUTO)
-    except cv2.error as exc:
-        msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else "unreadable"
-        raise CameraFileError(f"{path}: not a readable OpenCV FileStorage file: {msg}") from None
+    except (cv2.error, SystemError) as exc:
+        raise CameraFileError(f"{path}: not a valid OpenCV FileStorage file "
+                              f"({_opencv_reason(exc)}): {_OPENCV_FIX}") from None
     try:
         if not fs.isOpened():
-            raise CameraFileError(f"{path}: OpenCV cannot open it as a FileStorage file")
+            raise CameraFileError(f"{path}: OpenCV cannot open it as a FileStorage file: "
+                                  f"{_OPENCV_FIX}")
+        if fs.root().empty() or (fs.root().isMap() and not fs.root().keys()):
+            raise CameraFileError(f"{path}: an empty OpenCV FileStorage file, no camera_matrix "
+                                  f"({_OPENCV_FIX})")
+        if not fs.root().isMap():
+            raise CameraFileError(f"{path}: an OpenCV FileStorage file whose top level is not "
+                                  "a mapping of named nodes (camera_matrix, "
+                                  "distortion_coefficients, image_width, image_height)")
+
+        def integer(node: Any, field: str, low: int, high: int) -> int:
+            value = node.real() if node.isInt() or node.isReal() else None
+            if value is None or not math.isfinite(value) or value != int(value) \
+                    or not low <= value <= high:
+                shown = node.string() if node.isString() else (
+                    "nothing" if value is None else f"{value:g}")
+                raise CameraFileError(f"{path}: {field} must be an integer in [{low}, {high}], "
+                                      f"got {shown}")
+            return int(value)
 
         def mat(name: str) -> np.ndarray:
             node = fs.getNode(name)
-            if node.empty() or not node.isMap():
+            if node.empty():
                 raise CameraFileError(f"{path}: no {name} matrix (OpenCV calibration files "
                                       "hold camera_matrix and distortion_coefficients)")
-            m = node.mat()
-            if m is None:
-                raise CameraFileError(f"{path}: {name} is not an opencv-matrix")
-            return np.asarray(m, dtype=np.float64)
+            if not node.isMap():
+                raise CameraFileError(f"{path}: {name} is not an opencv-matrix (a node with "
+                                      "rows, cols, dt and data)")
+            for key in ("rows", "cols", "dt", "data"):
+                if node.getNode(key).empty():
+                    raise CameraFileError(f"{path}: {name}.{key} is missing (an opencv-matrix "
+                                          "has rows, cols, dt and data)")
+            rows = integer(node.getNode("rows"), f"{name}.rows", 1, MAX_OPENCV_MATRIX_SIDE)
+            cols = integer(node.getNode("cols"), f"{name}.cols", 1, MAX_OPENCV_MATRIX_SIDE)
+            dt = node.getNode("dt")
+            if not dt.isString() or dt.string() not in ("d", "f"):
+                raise CameraFileError(f"{path}: {name}.dt must be d or f (a matrix of floating-"
+                                      "point numbers)")
+            data = node.getNode("data")
+            if not data.isSeq() or data.size() != rows * cols:
+                count = data.size() if data.isSeq() else "no list of"
+                raise CameraFileError(f"{path}: {name}.data must hold rows × cols = "
+                                      f"{rows * cols} numbers, got {count} numbers")
+            for k in range(data.size()):
+                item = data.at(k)
+                if not (item.isInt() or item.isReal()):
+                    shown = item.string() if item.isString() else "not a number"
+                    raise CameraFileError(f"{path}: {name}.data[{k}] must be a number, got "
+                                          f"{shown!r}")
+            return np.asarray(node.mat(), dtype=np.float64)
 
         def size(name: str) -> int:
             node = fs.getNode(name)
             if node.empty():
                 raise CameraFileError(f"{path}: no {name}: the image size is needed (add "
                                       f"'{name}: N' — OpenCV's calibration sample writes it)")
-            value = node.real()
-            if not math.isfinite(value) or value != int(value) or value <= 0:
-                raise CameraFileError(f"{path}: {name} must be a positive integer, got {value}")
-            return int(value)
+            return integer(node, name, MIN_IMAGE_SIDE_PX, MAX_IMAGE_SIDE_PX)
 
         try:
             K = mat("camera_matrix")
             D = mat("distortion_coefficients").ravel()
             width, height = size("image_width"), size("image_height")
         except (cv2.error, SystemError) as exc:
-            msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else "unreadable"
-            raise CameraFileError(f"{path}: a malformed OpenCV matrix or size: {msg}") \
-                from None
+            raise CameraFileError(f"{path}: a malformed OpenCV matrix or size "
+                                  f"({_opencv_reason(exc)}): {_OPENCV_FIX}") from None
     finally:
         fs.release()
     if K.shape != (3, 3):
