@@ -97,12 +97,13 @@ def camera_input(text: str) -> Path | None:
     return None if text in NAMED_CAMERAS else Path(text)
 
 
-def resolve_camera_arg(text: str) -> Camera:
-    """The camera of ``--camera``; a clear ``CliError`` for a bad name or file."""
+def resolve_camera_arg(text: str, argument: str = "--camera") -> Camera:
+    """The camera of ``--camera`` (or of the argument named ``argument``, as the command's
+    usage line names it); a clear ``CliError`` for a bad name or file."""
     try:
         return load_camera(text)
     except CameraFileError as exc:
-        raise CliError(f"--camera: {exc}") from None
+        raise CliError(f"{argument}: {exc}") from None
 
 
 # --------------------------------------------------------------------------- fit
@@ -253,7 +254,8 @@ def camera_summary(camera: Camera) -> dict[str, Any]:
 
 
 def cmd_camera_show(args: argparse.Namespace) -> int:
-    camera = resolve_camera_arg(args.camera)
+    # a positional: named as argparse names it in its own errors, not as an option
+    camera = resolve_camera_arg(args.camera, "argument camera")
     summary = camera_summary(camera)
     if args.json:
         print(json.dumps(summary))
