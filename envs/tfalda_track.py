@@ -227,7 +227,9 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
     after the start on an open track), ± 0.05 m sideways and ± 0.05 rad in heading
     (uniform), at the cruise speed with straight wheels; never touching a carton.
     ``reset(options=...)`` overrides: ``track`` (name, seed or ``Track``), ``start``
-    ``(s_m, lateral_m, heading_error_rad)`` with ``lateral_m`` from the centre line,
+    ``(s_m, lateral_m, heading_error_rad)`` with ``lateral_m`` from the centre line (on the
+    road: ``|lateral_m| ≤ track.half_road_m``), ``s_m`` on an open track or within a lap
+    of a closed one's start line, ``|heading_error_rad| ≤ π`` (``Track.check_place``),
     ``speed_m_s``, ``domain_randomization`` (bool) and ``faults`` (a schedule of
     ``tfalda_sim.faults``: blackout, overexposure, glare, camera shake, lateral kick,
     marking gap). Unknown keys raise ``ValueError``.
@@ -548,14 +550,10 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
 
     @staticmethod
     def _check_start(track: Track, start: tuple[float, float, float]) -> None:
-        """A start on ``track`` (three finite floats already)."""
-        s_m, lateral_m, _ = start
-        if not track.closed and not 0.0 <= s_m <= track.length_m:
-            raise ValueError(f"start s_m {s_m} is off the open track (0 ≤ s_m ≤ "
-                             f"{track.length_m:.3f} m)")
-        if abs(lateral_m) > track.half_road_m:
-            raise ValueError(f"start lateral_m {lateral_m} is off the road (|lateral| ≤ "
-                             f"{track.half_road_m:.3f} m)")
+        """A start on ``track`` (three finite floats already): ``Track.check_place``'s
+        bounds."""
+        track.check_place(*start, names=("start s_m", "start lateral_m",
+                                         "start heading_error_rad"))
 
     def _start_pose(self, track: Track, start: tuple[float, float, float] | None,
                     rng: np.random.Generator) -> tuple[float, float, float]:

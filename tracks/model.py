@@ -267,6 +267,30 @@ class Track:
         """Distance from the centre line to the outer edge of a side line [m]."""
         return self.lane_width_m + 0.5 * LINE_WIDTH_M
 
+    def check_place(self, s_m: float, lateral_m: float, heading_rad: float, *,
+                    names: tuple[str, str, str] = ("s_m", "lateral_m", "heading_rad")) -> None:
+        """A car's place on this track — arc length, offset from the centre line, heading
+        relative to the road — or a ``ValueError`` naming the first value out of bounds
+        (by its name in ``names``) and the bounds. The bounds: ``s`` on an open track
+        within ``[0, length]``; on a closed one (which wraps) within a lap of the start
+        line, ``[-length, length]``; ``|lateral|`` at most ``half_road_m`` (on the road);
+        ``|heading|`` at most π. Beyond them nothing of the road is seen or reached
+        (a lateral of 1e300 m), or a wrapped arc length has lost its every digit."""
+        name_s, name_lat, name_h = names
+        length = self.length_m
+        if not self.closed and not 0.0 <= s_m <= length:
+            raise ValueError(f"{name_s} {s_m:g} m is off the open track: use 0 ≤ s ≤ "
+                             f"{length:.3f} m")
+        if self.closed and not -length <= s_m <= length:
+            raise ValueError(f"{name_s} {s_m:g} m is more than a lap from the start line: use "
+                             f"{-length:.3f} ≤ s ≤ {length:.3f} m (the closed track wraps)")
+        if not abs(lateral_m) <= self.half_road_m:
+            raise ValueError(f"{name_lat} {lateral_m:g} m is off the road: use |lateral| ≤ "
+                             f"{self.half_road_m:.3f} m (centre line to a side line's edge)")
+        if not abs(heading_rad) <= math.pi:
+            raise ValueError(f"{name_h} {heading_rad:g} rad is more than a half turn from "
+                             f"the road's direction: use |heading| ≤ π ({math.pi:.4f}) rad")
+
     def closure_error(self) -> tuple[float, float]:
         """Gap between the chain's end and its start: distance [m], heading [rad]."""
         end = self.end_pose

@@ -194,6 +194,11 @@ BAD_OPTIONS = [
     ("start", (1.0, math.nan, 0.0), ValueError, "finite"),
     ("start", np.zeros((3, 1)), ValueError, "three"),
     ("start", (1.0, 0.9, 0.0), ValueError, "off the road", "lateral_m 0.9"),
+    ("start", (1.0, 1e300, 0.0), ValueError, "off the road", "lateral_m 1e+300"),
+    ("start", (1e300, -0.2, 0.0), ValueError, "more than a lap", "s_m 1e+300"),
+    ("start", (-23.0, -0.2, 0.0), ValueError, "more than a lap", "s_m -23"),
+    ("start", (1.0, -0.2, 1e300), ValueError, "half turn", "heading_error_rad 1e+300"),
+    ("start", (1.0, -0.2, -3.2), ValueError, "half turn", "heading_error_rad -3.2"),
     ("speed_m_s", "2", TypeError, "real number"),
     ("speed_m_s", None, TypeError, "real number"),
     ("speed_m_s", np.array([1.0]), TypeError, "real number"),
@@ -270,3 +275,11 @@ def test_fault_sizes_are_refused_when_the_fault_is_made() -> None:
                          "CameraShake.amplitude_rad")):
         with pytest.raises(ValueError, match=re.escape(field) + " must be finite and in"):
             make()
+
+
+def test_a_start_at_the_bounds_is_accepted(oval_env: TfaldaTrackEnv) -> None:
+    """A closed track wraps (a lap back is the start line); the road's edge and a half turn
+    are starts too."""
+    length = oval_env._default_track.length_m
+    _, info = oval_env.reset(seed=0, options={"start": (-length + 1.0, -0.4, -3.14)})
+    assert info["s_m"] == pytest.approx(1.0, abs=1e-6)

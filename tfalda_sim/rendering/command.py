@@ -30,12 +30,15 @@ def register(sub: Any) -> None:
     ren = sub.add_parser("render", help="render one camera frame of a track")
     ren.add_argument("--track", required=True,
                      help="named track, seed (generated track) or track file (.json)")
-    ren.add_argument("--s", type=finite_float_arg, required=True, help="arc length of the car [m]")
+    ren.add_argument("--s", type=finite_float_arg, required=True,
+                     help="arc length of the car [m]: 0 to the track's length (a closed track "
+                          "wraps: -length to length)")
     ren.add_argument("--lateral", type=finite_float_arg, default=-0.2,
-                     help="lateral offset from the centre line [m], left > 0 (default: the "
-                          "middle of the right lane)")
+                     help="lateral offset from the centre line [m], left > 0, on the road "
+                          "(|lateral| ≤ half the road's width; default: the middle of the "
+                          "right lane)")
     ren.add_argument("--heading", type=finite_float_arg, default=0.0,
-                     help="heading relative to the road [rad], left > 0")
+                     help="heading relative to the road [rad], left > 0, within ±π")
     ren.add_argument("--out", type=Path, required=True,
                      help="frame PNG (grayscale, the camera's size: 752×480 for thesis)")
     ren.add_argument("--truth", type=Path, help="ground-truth PNG (labels in colour, ego lane "
@@ -72,8 +75,11 @@ def cmd_render(args: argparse.Namespace) -> int:
                   inputs={"track": track_file_arg(args.track), "camera": camera_input(args.camera)})
     camera = resolve_camera_arg(args.camera)
     track = resolve_track_arg(args.track)
-    if not track.closed and not 0.0 <= args.s <= track.length_m:
-        raise CliError(f"--s {args.s} m is outside the open track [0, {track.length_m:.2f}] m")
+    try:
+        track.check_place(args.s, args.lateral, args.heading,
+                          names=("--s", "--lateral", "--heading"))
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
     rng = np.random.default_rng(args.seed)
     effects = {"off": Effects.off, "default": Effects,
                "random": lambda: DomainRandomization().sample(rng)}[args.effects]()
