@@ -1,7 +1,8 @@
 """The closed-loop world: the car on a track, simulated in pymunk.
 
 The car is a kinematic pymunk body driven by the bicycle model of ``tfalda_sim.vehicle``
-(its velocity and yaw rate are set every physics step, pymunk integrates them); the
+or, with ``dynamics``, by the dynamic single-track model of ``tfalda_sim.dynamics`` (its
+velocity and yaw rate are set every physics step, pymunk integrates them); the
 track's obstacle cartons are static bodies. One ``step`` is one camera frame (50 per
 second) made of a fixed number of physics steps; after each physics step the car's body
 is tested against the cartons, so a collision is caught even at top speed (4 cm per
@@ -16,13 +17,22 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
 import pymunk
 
 from tfalda_sim.tracks import Track
 from tfalda_sim.tracks.rules import obstacle_corners
 
 from .camera import FRAME_RATE_HZ
-from .vehicle import CarParams, motor_step, servo_step, yaw_rate
+from .dynamics import DynamicsParams, advance, cruise_accel, kinematic_state
+from .vehicle import (
+    CarParams,
+    ServoParams,
+    motor_step,
+    servo_step,
+    servo_target_step,
+    yaw_rate,
+)
 
 PHYSICS_STEPS_PER_FRAME: int = 4
 """Physics steps per camera frame (5 ms each at 50 frames/s)."""
@@ -53,11 +63,18 @@ class World:
 
     Without a throttle the car holds the speed given to ``reset`` (cruise control); with
     one (``step(steer, throttle=...)``) it accelerates and brakes within the car's limits.
+
+    ``dynamics``: None (the kinematic bicycle: it turns as sharply as its wheels point at
+    any speed) or a ``DynamicsParams`` (the dynamic single-track car: it slides once
+    v² / R exceeds its tyres' grip; ``mu_scale`` scales its friction, a wet patch).
+    ``servo``: the steering servo's lag and dead band (default: none).
     """
 
     def __init__(self, track: Track, car: CarParams | None = None, *,
                  frame_rate_hz: float = FRAME_RATE_HZ,
-                 physics_steps: int = PHYSICS_STEPS_PER_FRAME) -> None:
+                 physics_steps: int = PHYSICS_STEPS_PER_FRAME,
+                 dynamics: DynamicsParams | None = None,
+                 servo: ServoParams | None = None) -> None:
         if not (math.isfinite(frame_rate_hz) and frame_rate_hz > 0):
             raise ValueError(f"frame_rate_hz must be finite and > 0, got {frame_rate_hz}")
         if physics_steps < 1:
@@ -73,6 +90,13 @@ class World:
         self.obstacle_shapes: list[pymunk.Poly] = []
         self.speed_m_s = 0.0
         self.steer_rad = 0.0
+        self.dynamics = dynamics
+        self.servo = servo or ServoParams()
+        self._servo_target = 0.0
+        self._params = None if dynamics is None else dynamics.vector(self.car.wheelbase_m)
+        self._state = np.zeros(7)  # the dynamic model's state (tfalda_sim.dynamics)
+        self._set_speed_m_s = 0.0  # what cruise control holds (dynamic car)
+        self.mu_scale = 1.0
         self.set_track(track)
 
     def set_track(self, track: Track) -> None:
@@ -130,6 +154,12 @@ class World:
                              self.car.max_steer_rad)
         self.time_s = 0.0
         self._s_hint = None
+        self._servo_target = self.steer_rad
+        self._set_speed_m_s = self.speed_m_s
+        self.mu_scale = 1.0
+        if self._params is not None:
+            self._state = kinematic_state(x, y, yaw, self.speed_m_s, self.steer_rad,
+                                          self._params)
         self.place((x, y, yaw))
         self.collided = bool(self.obstacle_shapes) and self._touching()
 
@@ -151,23 +181,56 @@ class World:
             raise ValueError(f"throttle must be in [-1, 1], got {throttle}")
         dt = self.frame_dt_s / self.physics_steps
         car = self.car
+        servo = self.servo
         hit = False
         for _ in range(self.physics_steps):
-            self.steer_rad = servo_step(self.steer_rad, steer_command_rad, dt, car)
-            if throttle is not None:
-                self.speed_m_s = motor_step(self.speed_m_s, throttle, dt, car)
-            omega = yaw_rate(self.speed_m_s, self.steer_rad, car)
-            # Velocity along the mid-step heading: second-order accurate on an arc.
-            heading = self.body.angle + 0.5 * omega * dt
-            self.body.velocity = (self.speed_m_s * math.cos(heading),
-                                  self.speed_m_s * math.sin(heading))
-            self.body.angular_velocity = omega
+            if servo.lag_s > 0.0 or servo.dead_band_rad > 0.0:
+                self._servo_target = servo_target_step(self._servo_target,
+                                                       steer_command_rad, dt, servo.lag_s)
+                self.steer_rad = servo_step(self.steer_rad, self._servo_target, dt, car,
+                                            servo.dead_band_rad)
+            else:
+                self.steer_rad = servo_step(self.steer_rad, steer_command_rad, dt, car)
+            if self._params is not None:
+                self._move_dynamic(throttle, dt)
+            else:
+                if throttle is not None:
+                    self.speed_m_s = motor_step(self.speed_m_s, throttle, dt, car)
+                omega = yaw_rate(self.speed_m_s, self.steer_rad, car)
+                # Velocity along the mid-step heading: second-order accurate on an arc.
+                heading = self.body.angle + 0.5 * omega * dt
+                self.body.velocity = (self.speed_m_s * math.cos(heading),
+                                      self.speed_m_s * math.sin(heading))
+                self.body.angular_velocity = omega
             self.space.step(dt)
             if self.obstacle_shapes and self._touching():
                 hit = True
         self.time_s += self.frame_dt_s
         self.collided = self.collided or hit
         return hit
+
+    def _move_dynamic(self, throttle: float | None, dt: float) -> None:
+        """The dynamic car over ``dt``: its state integrated (``dynamics.advance``) from
+        the body's pose, the body given the velocity that takes it to the new pose."""
+        car, state = self.car, self._state
+        p = self.body.position
+        x0, y0, yaw0 = float(p.x), float(p.y), float(self.body.angle)
+        state[0], state[1], state[2] = x0, y0, yaw0  # a kick (place) moved the body
+        if throttle is None:
+            a_cmd = cruise_accel(float(state[3]), self._set_speed_m_s, car.max_accel_m_s2,
+                                 car.max_brake_m_s2)
+        else:
+            a_cmd = throttle * (car.max_accel_m_s2 if throttle >= 0 else car.max_brake_m_s2)
+        advance(state, self.steer_rad, a_cmd, dt, self._params, self.mu_scale,
+                car.max_speed_m_s)
+        self.body.velocity = ((state[0] - x0) / dt, (state[1] - y0) / dt)
+        self.body.angular_velocity = (state[2] - yaw0) / dt
+        self.speed_m_s = float(state[3])
+
+    @property
+    def lateral_speed_m_s(self) -> float:
+        """The CoG's sideways speed in the car frame [m/s] (0 for the kinematic car)."""
+        return float(self._state[4]) if self._params is not None else 0.0
 
     def _touching(self) -> bool:
         """The car's body overlaps an obstacle."""
