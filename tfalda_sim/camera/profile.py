@@ -161,9 +161,32 @@ def _parse_yaml(path: Path, text: str) -> Any:
         raise CameraFileError(f"{path}: not valid YAML{where}: {problem}") from None
 
 
+def _yaml_float(number: float) -> str:
+    """``number`` spelt so that YAML 1.1 reads it as a float (a decimal point in the
+    mantissa and a signed exponent)."""
+    text = repr(number)
+    mantissa, _, exponent = text.partition("e")
+    if "." not in mantissa:
+        mantissa += ".0"
+    return f"{mantissa}e{exponent}" if exponent else mantissa
+
+
+def _text_number_hint(value: str) -> str:
+    """Why a string that reads as a number came from the YAML, and how to write it."""
+    try:
+        number = float(value)
+    except (ValueError, OverflowError):
+        return ""
+    if not math.isfinite(number):
+        return ""
+    return (f": YAML 1.1 (PyYAML, which reads camera files) reads {value!r} as text, a float "
+            f"needs a decimal point and a signed exponent: write {_yaml_float(number)}")
+
+
 def _number(path: Path, field: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise CameraFileError(f"{path}: {field} must be a number, got {value!r}")
+        hint = _text_number_hint(value) if isinstance(value, str) else ""
+        raise CameraFileError(f"{path}: {field} must be a number, got {value!r}{hint}")
     try:
         number = float(value)
     except OverflowError:

@@ -4,6 +4,7 @@ and bad files refused naming the field."""
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import cv2
@@ -264,3 +265,29 @@ def test_pickled_cameras_stay_read_only_and_the_default_bonnet_follows_the_size(
     assert FisheyeCamera(FisheyeCamera.default().K, np.zeros(4)).bonnet.enabled
     with pytest.raises(ValueError, match="top_row"):
         FisheyeCamera(K, np.zeros(4), width=1280, height=800, bonnet=Bonnet(top_row=900.0))
+
+
+@pytest.mark.parametrize("written,field,fix", [
+    ("3e1", "frame_rate_hz", "write 30.0"),
+    ("1e9", "frame_rate_hz", "write 1000000000.0"),
+    ("1.0e9", "frame_rate_hz", "write 1000000000.0"),
+    ("2E-1", "mount.height_m", "write 0.2"),
+    ("1e20", "mount.forward_m", "write 1.0e+20"),
+])
+def test_an_exponent_yaml_reads_as_text_is_explained(tmp_path: Path, written: str, field: str,
+                                                     fix: str) -> None:
+    """PyYAML (YAML 1.1) reads 1e9 as a string: the error says so and how to write it."""
+    path = _profile(tmp_path)
+    key = field.split(".")[-1]
+    lines = [f"{ln.split(':')[0]}: {written}" if ln.strip().startswith(f"{key}:") else ln
+             for ln in path.read_text().splitlines()]
+    path.write_text("\n".join(lines) + "\n")
+    assert yaml.safe_load(path.read_text())  # still YAML, the number now text
+    with pytest.raises(CameraFileError, match=rf"{field} must be a number, got '{written}': "
+                       r"YAML 1\.1 \(PyYAML.*reads .* as text.*" + re.escape(fix)):
+        load_camera(path)
+    if written == "1e9":
+        from tests.cli_helpers import tfalda
+
+        run = tfalda("camera", "show", path, cwd=tmp_path, code=2)
+        assert "got '1e9': YAML 1.1" in run.err and "write 1000000000.0" in run.err
