@@ -125,12 +125,37 @@ def _read_json(path: Path, option: str) -> Any:
         raise CliError(f"{option} {path}: not valid JSON ({exc})") from None
 
 
+MAX_PIXEL_COORDINATE: float = 1e9
+"""Largest |u| or |v| read from a points file [px]: far beyond any image; larger is not a
+pixel (and would overflow the fit's arithmetic)."""
+
+
+def _short_json(value: Any) -> str:
+    text = json.dumps(value, allow_nan=True)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
 def _pixel_list(value: Any, what: str) -> np.ndarray:
-    if not isinstance(value, list) or not all(
-            isinstance(p, list) and len(p) == 2
-            and all(isinstance(c, (int, float)) and not isinstance(c, bool)
-                    and abs(c) < 1e9 and math.isfinite(c) for c in p) for p in value):
-        raise CliError(f"{what} must be a list of [u, v] pixel pairs")
+    """``value`` as an ``(n, 2)`` array; a clear ``CliError`` names the first bad entry by
+    its position (``what[k]``, its ``u`` or ``v``) and its value."""
+    if not isinstance(value, list):
+        raise CliError(f"{what} must be a list of [u, v] pixel pairs, got {_short_json(value)}")
+    for k, pair in enumerate(value):
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise CliError(f"{what}[{k}] must be a [u, v] pixel pair, got {_short_json(pair)}")
+        for name, c in zip("uv", pair, strict=True):
+            where = f"{what}[{k}] {name}"
+            if isinstance(c, bool) or not isinstance(c, (int, float)):
+                raise CliError(f"{where} must be a number of pixels, got {_short_json(c)}")
+            try:
+                finite = math.isfinite(c) and abs(c) <= MAX_PIXEL_COORDINATE
+            except OverflowError:  # an integer too large for a float
+                finite = False
+            if not finite:
+                # JSON has no NaN or Infinity; Python's json module accepts them
+                raise CliError(f"{where} is {_short_json(c)}: a pixel coordinate must be a "
+                               f"finite number within ±{MAX_PIXEL_COORDINATE:g} px (remove the "
+                               "pair or mark the pixel)")
     return np.array(value, dtype=np.float64)
 
 
@@ -142,7 +167,7 @@ def _points(path: Path) -> list[np.ndarray | None]:
     unknown = [k for k in data if k not in ("centre", "left", "right")]
     if unknown:
         raise CliError(f"--points: unknown key {unknown[0]!r} (known: centre, left, right)")
-    return [None if data.get(k) is None else _pixel_list(data[k], f"--points {k}")
+    return [None if data.get(k) is None else _pixel_list(data[k], f"--points {path}: {k}")
             for k in ("centre", "left", "right")]
 
 
@@ -156,13 +181,18 @@ def _bonnet(spec: str, frame: np.ndarray) -> Bonnet:
             if isinstance(exc, MountFitError):
                 raise
             raise CliError(f"--bonnet auto: {exc}") from None
-    poly = _pixel_list(_read_json(Path(spec), "--bonnet"), "--bonnet")
+    poly = _bonnet_polygon(spec)
     try:
         bonnet = Bonnet.polygon(poly)
         bonnet.check_inside(frame.shape[1], frame.shape[0])
     except ValueError as exc:
         raise CliError(f"--bonnet: {exc}") from None
     return bonnet
+
+
+def _bonnet_polygon(spec: str) -> np.ndarray:
+    """The polygon of a ``--bonnet FILE``."""
+    return _pixel_list(_read_json(Path(spec), "--bonnet"), f"--bonnet {spec}: polygon")
 
 
 def fit_summary(fit: MountFit) -> dict[str, Any]:
@@ -194,6 +224,8 @@ def cmd_camera_fit(args: argparse.Namespace) -> int:
         raise CliError("--points needs known intrinsics (--intrinsics), not --fit-focal")
     frame = _read_frame(args.frame)
     points = _points(args.points) if args.points else None
+    if args.bonnet not in ("auto", "none"):
+        _bonnet_polygon(args.bonnet)  # a bad file refused before the fit's work
     try:
         if args.fit_focal:
             fit = fit_focal(frame, frame.shape[1], frame.shape[0])
