@@ -22,6 +22,7 @@ import numpy as np
 from gymnasium import spaces
 
 from tfalda_sim.camera import FRAME_RATE_HZ, NAMED_CAMERAS, Camera, load_camera
+from tfalda_sim.dynamics import DynamicsParams
 from tfalda_sim.evaluation.geometric import geometric_hit_rates
 from tfalda_sim.faults import Fault, FaultInjector
 from tfalda_sim.perception import DetectorConfig, LaneObservation, RoiLayout, TfaldaDetector
@@ -30,7 +31,7 @@ from tfalda_sim.rendering import DomainRandomization, Effects, Renderer, Scene, 
 from tfalda_sim.rendering.overlay import draw_observation
 from tfalda_sim.rendering.topdown import TopDownMap
 from tfalda_sim.tracks import NAMED_TRACKS, GeneratorParams, Track, generate, load_named
-from tfalda_sim.vehicle import MIN_CRUISE_SPEED_M_S, CarParams
+from tfalda_sim.vehicle import MIN_CRUISE_SPEED_M_S, CarParams, ServoParams
 from tfalda_sim.world import TrackPosition, World
 
 from ._checks import (
@@ -173,6 +174,27 @@ def resolve_detector(spec: object) -> DetectorConfig:
                     f"({names}) or None, got {show(spec)}")
 
 
+VEHICLES: tuple[str, ...] = ("kinematic", "dynamic")
+"""The car models by name: the kinematic bicycle (the default) and the dynamic
+single-track car with the F1TENTH gym's tyres (``tfalda_sim.dynamics``)."""
+
+
+def resolve_vehicle(spec: object) -> DynamicsParams | None:
+    """The env's ``vehicle``: a name of ``VEHICLES`` or a ``DynamicsParams``; None for the
+    kinematic car."""
+    if isinstance(spec, DynamicsParams):
+        return spec
+    if spec == "dynamic":
+        return DYNAMIC_CAR
+    check_choice("vehicle", spec, VEHICLES)
+    return None
+
+
+DYNAMIC_CAR = DynamicsParams()
+"""The dynamic car of ``vehicle="dynamic"`` (one instance: envs share their world's
+parameters by identity)."""
+
+
 @dataclass(frozen=True)
 class _ResetOptions:
     """``reset``'s options, checked (before any state of the env changes)."""
@@ -268,7 +290,12 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
     and the step rate follow it). On a camera other than the thesis', a preset or a
     ``DetectorConfig`` with the thesis' pixel layout gets its geometry derived for the
     camera (``DetectorConfig.for_camera``); a camera that cannot see the lane is refused.
-    ``car``: ``CarParams``. ``reward``: ``RewardWeights``. ``max_laps``: an int ≥ 0, 0 =
+    ``car``: ``CarParams``. ``vehicle``: ``"kinematic"`` (the default: it turns as sharply
+    as its wheels point at any speed), ``"dynamic"`` (the single-track car with
+    magic-formula tyres that slides beyond its grip, ``tfalda_sim.dynamics``) or a
+    ``DynamicsParams``. ``servo``: the steering servo's lag and dead band, a
+    ``ServoParams`` (default: none; ``tfalda_sim.vehicle.REAL_SERVO`` a hobby servo's).
+    ``reward``: ``RewardWeights``. ``max_laps``: an int ≥ 0, 0 =
     no limit (floats are refused, even 2.0). ``faults``: a default fault schedule for
     every episode, a list or tuple of ``tfalda_sim.faults`` faults.
 
@@ -305,7 +332,9 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
                  detector: DetectorConfig | str | None = None,
                  camera: Camera | str | os.PathLike[str] = "thesis",
                  car: CarParams | None = None, reward: RewardWeights | None = None,
-                 max_laps: int = 0, faults: Sequence[Fault] = ()) -> None:
+                 max_laps: int = 0, faults: Sequence[Fault] = (),
+                 vehicle: str | DynamicsParams = "kinematic",
+                 servo: ServoParams | None = None) -> None:
         if render_mode is not None:
             check_choice("render_mode", render_mode, self.metadata["render_modes"],
                          optional=True)
@@ -323,6 +352,11 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         self.speed_m_s = check_real("speed_m_s", speed_m_s, MIN_CRUISE_SPEED_M_S,
                                     self.car.max_speed_m_s, unit=" m/s")
         self.max_laps = check_int("max_laps", max_laps)
+        self.dynamics = resolve_vehicle(vehicle)
+        self.servo = check_optional("servo", servo, ServoParams,
+                                    "a tfalda_sim.vehicle.ServoParams") or ServoParams()
+        if self.dynamics is not None:
+            self.dynamics.vector(self.car.wheelbase_m)  # its CoG between the car's axles
         self.randomization = check_optional(
             "randomization", randomization, DomainRandomization,
             "a tfalda_sim.rendering.DomainRandomization") or DomainRandomization()
@@ -411,9 +445,11 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
 
         world = self._world
         if (world is None or world.car is not self.car
-                or world.frame_dt_s != 1.0 / self.camera.frame_rate_hz):
+                or world.frame_dt_s != 1.0 / self.camera.frame_rate_hz
+                or world.dynamics is not self.dynamics or world.servo is not self.servo):
             self._track = None  # set below, once the world is on the track
-            self._world = World(track, self.car, frame_rate_hz=self.camera.frame_rate_hz)
+            self._world = World(track, self.car, frame_rate_hz=self.camera.frame_rate_hz,
+                                dynamics=self.dynamics, servo=self.servo)
             self._map = None
         elif self._track != track:
             # The same car in its space: cheaper than a new one. A reset interrupted inside
