@@ -20,7 +20,7 @@ from ..outputs import Outputs
 from .dimensions import MAT_EDGE_MARGIN_M
 from .fileformat import TrackFileError, load_track, save_track
 from .generator import GeneratorParams, generate
-from .model import Track
+from .model import Track, printable
 from .named import NAMED_TRACKS, named_path
 from .preview import write_preview
 from .rules import Violation, validate
@@ -75,7 +75,7 @@ def track_summary(track: Track, violations: list[Violation]) -> dict[str, Any]:
 
 def _print_summary(summary: dict[str, Any]) -> None:
     r = summary["min_centre_radius_m"]
-    print(f"track        {summary['name'] or '-'}"
+    print(f"track        {printable(summary['name']) or '-'}"
           + (f" (seed {summary['seed']})" if summary["seed"] is not None else ""))
     print(f"valid        {'yes' if summary['valid'] else 'NO'}")
     print(f"length       {summary['length_m']:.2f} m, {summary['segments']} segments, "
@@ -136,8 +136,8 @@ def cmd_track_list(args: argparse.Namespace) -> int:
         print(json.dumps({"tracks": rows}))
     else:
         for row in rows:
-            print(f"{row['name']:14} {row['length_m']:7.2f} m  "
-                  f"{'closed' if row['closed'] else 'open  '}  {row['description']}")
+            print(f"{printable(row['name']):14} {row['length_m']:7.2f} m  "
+                  f"{'closed' if row['closed'] else 'open  '}  {printable(row['description'])}")
     return 0
 
 

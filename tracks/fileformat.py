@@ -60,7 +60,8 @@ VERSION = 1
 
 __all__ = [
     "FORMAT", "MAX_FILE_BYTES", "MAX_GAPS", "MAX_HEADING_RAD", "MAX_INTERSECTIONS",
-    "MAX_JSON_DEPTH", "MAX_LANE_WIDTH_M", "MAX_MAT_EXTENT_M", "MAX_OBSTACLES", "MAX_SEGMENTS",
+    "MAX_JSON_DEPTH", "MAX_LANE_WIDTH_M", "MAX_MAT_EXTENT_M", "MAX_NAME_CHARS", "MAX_OBSTACLES",
+    "MAX_SEGMENTS",
     "MAX_TRACK_LENGTH_M", "MIN_RADIUS_M", "MIN_SEGMENT_LENGTH_M", "VERSION", "TrackFileError",
     "load_track", "save_track", "track_from_dict", "track_to_dict",
 ]
@@ -113,6 +114,12 @@ MAX_JSON_DEPTH: int = 16
 """Deepest nesting of JSON arrays and objects [levels]. A track document needs 3 (top
 object → list → element); deeper files are refused before decoding, so the decoder's
 recursion never meets a hostile depth."""
+
+MAX_NAME_CHARS: int = 100
+"""Longest track name [characters]. A name is a label (``oval``, ``seed-7``) that commands
+print on one line and draw into videos; the named and generated tracks' are ≤ 12. Its
+characters must all be printable (``str.isprintable``): no control characters, which a
+terminal would act on (clear the screen, return the cursor to fake a line)."""
 
 _MAX_INT_DIGITS = 400
 """Longer integers are not converted (no float holds one; Python refuses > 4300 digits)."""
@@ -288,6 +295,18 @@ class _Reader:
             self.fail(f"must be Unicode text, has a lone surrogate at character {exc.start}", key)
         return v
 
+    def label(self, key: str, most: int) -> str:
+        """Optional printable one-line text of at most ``most`` characters."""
+        v = self.text(key)
+        if len(v) > most:
+            self.fail(f"must be at most {most} characters, has {len(v)}", key)
+        bad = next((i for i, c in enumerate(v) if not c.isprintable()), None)
+        if bad is not None:
+            # repr: the error line must not carry the character it refuses
+            self.fail(f"must be printable text on one line; character {bad} is {v[bad]!r}",
+                      key)
+        return v
+
     def choice(self, key: str, options: tuple[str, ...]) -> str:
         v = self.text(key, required=True)
         if v not in options:
@@ -403,7 +422,7 @@ def track_from_dict(data: Any, source: str = "<dict>") -> Track:
         gaps=tuple(gaps),
         obstacles=tuple(obstacles),
         intersections=tuple(intersections),
-        name=top.text("name"),
+        name=top.label("name", MAX_NAME_CHARS),
         description=top.text("description"),
         seed=seed,
     )

@@ -49,6 +49,16 @@ INDEX_CACHE_SIZE: int = 8
 _INDEX_CACHE: dict[tuple, GridIndex] = {}
 
 
+def printable(text: str) -> str:
+    """``text`` as a command prints it: every character that is not printable (a control
+    character, a line or paragraph separator) as its Python escape (``\x1b``, ``\r``),
+    the rest as is. A name from a file or a track built in Python reaches the terminal:
+    it must not act on it (clear it, fake an output line)."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
 class Line(Enum):
     """The three longitudinal lines of a road, seen in the driving direction."""
 

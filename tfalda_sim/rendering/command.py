@@ -22,6 +22,7 @@ from ..cli_common import (
     seed_arg,
 )
 from ..outputs import Outputs
+from ..tracks import printable
 from ..tracks.command import resolve_track_arg, track_file_arg
 
 
@@ -115,8 +116,8 @@ def cmd_render(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(summary))
     else:
-        print(f"rendered {track.name} at s = {args.s:.2f} m, lateral {args.lateral:+.2f} m, "
-              f"heading {args.heading:+.3f} rad in {render_ms:.2f} ms")
+        print(f"rendered {printable(track.name)} at s = {args.s:.2f} m, lateral "
+              f"{args.lateral:+.2f} m, heading {args.heading:+.3f} rad in {render_ms:.2f} ms")
         for key in ("out", "truth"):
             if key in summary:
                 print(f"wrote {summary[key]}")
