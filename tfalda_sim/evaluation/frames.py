@@ -14,7 +14,7 @@ from ..camera import Camera
 from ..perception import DetectorConfig, HoughConfig, HoughDetector, TfaldaDetector
 from ..video import ImageError, read_grey_image
 from .baseline import band_rows, score_lines
-from .labels import LabelsError, labels_path_for, load_labels
+from .labels import LabelsError, labelled_frame, labels_path_for, load_labels
 from .metrics import EPSILON_PX, lane_hit_rates, truth_distance
 
 FRAME_SUFFIXES: tuple[str, ...] = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -33,7 +33,7 @@ class FramesError(ValueError):
 
 def frame_files(folder: Path, labels: Path) -> list[tuple[Path, Path]]:
     """(frame, labels file) pairs of ``folder``'s images in name order; every frame needs
-    ``<stem>.labels.json`` in ``labels``."""
+    ``<stem>.labels.json`` in ``labels`` whose ``frame`` (if given) names it."""
     if not folder.is_dir():
         raise FramesError(f"--frames {folder}: not a folder")
     if not labels.is_dir():
@@ -49,6 +49,10 @@ def frame_files(folder: Path, labels: Path) -> list[tuple[Path, Path]]:
         lab = labels_path_for(f, labels)
         if not lab.is_file():
             raise FramesError(f"{f.name} has no labels: expected {lab}")
+        try:  # before any scoring: a mismatch found at the last frame wastes the run
+            labelled_frame(lab, f)
+        except LabelsError as exc:
+            raise FramesError(str(exc)) from None
         pairs.append((f, lab))
     return pairs
 
@@ -106,7 +110,7 @@ def score_frames(pairs: Sequence[tuple[Path, Path]], camera: Camera, *,
     for frame_path, labels_path in pairs:
         frame = read_frame(frame_path, camera)
         try:
-            truth = load_labels(labels_path, camera.width, camera.height)
+            truth = load_labels(labels_path, camera.width, camera.height, frame=frame_path)
         except LabelsError as exc:
             raise FramesError(str(exc)) from None
         dist = truth_distance(truth.labels)

@@ -9,6 +9,9 @@ Format (``format: tfalda-sim-labels/1``)::
      "markings": [{"kind": "centre_line", "road": "ego",
                    "boundary": "left", "points": [[u, v, width_px], ...]}, ...]}
 
+``frame``: the labelled image's file name; the labels are refused for any other image
+(``evaluate --frames`` finds a frame's labels by its name, ``<stem>.labels.json``: a file
+copied or renamed to another frame's name would otherwise score it silently).
 ``kind``: ``right_line``, ``centre_line``, ``left_line``, ``start_line`` or ``stop_line``;
 ``road``: ``ego`` (the road the car is on) or ``other`` (a neighbouring or
 branching road's); ``boundary`` (optional): ``left`` or ``right`` for the two
@@ -82,12 +85,36 @@ def _read(path: Path) -> dict[str, Any]:
     return doc
 
 
-def load_labels(path: str | Path, width: int | None = None, height: int | None = None
-                ) -> FrameTruth:
+def _check_frame(path: Path, doc: dict[str, Any], frame: str | Path | None) -> None:
+    named = doc.get("frame")
+    if named is None:
+        return
+    if not isinstance(named, str) or not named:
+        raise _fail(path, f"frame must be the labelled image's file name, got {named!r}")
+    if frame is not None and Path(named).name != Path(frame).name:
+        # Labels of another picture score a detector against markings that are not in
+        # the frame: every figure would be wrong without a sign of it.
+        raise _fail(path, f"labels the frame {Path(named).name!r}, not {Path(frame).name!r} "
+                          "it is applied to (a frame's labels are <its name>.labels.json): "
+                          "label this frame, or if the labels are its own (the image was "
+                          f"renamed) set \"frame\": \"{Path(frame).name}\"")
+
+
+def labelled_frame(path: str | Path, frame: str | Path) -> None:
+    """Refuse (``LabelsError``) a labels file whose ``frame`` names another image than
+    ``frame``, without drawing its markings."""
+    p = Path(path)
+    _check_frame(p, _read(p), frame)
+
+
+def load_labels(path: str | Path, width: int | None = None, height: int | None = None,
+                frame: str | Path | None = None) -> FrameTruth:
     """The ground truth of a labels file; ``width``/``height`` [px], if given, must be the
-    file's (a frame of another size)."""
+    file's (a frame of another size); ``frame``, if given, must be the image the file's
+    ``frame`` names (when it names one)."""
     p = Path(path)
     doc = _read(p)
+    _check_frame(p, doc, frame)
     w, h = doc["image_width_px"], doc["image_height_px"]
     for key, value in (("image_width_px", w), ("image_height_px", h)):
         if isinstance(value, bool) or not isinstance(value, int) or not 16 <= value <= 8192:

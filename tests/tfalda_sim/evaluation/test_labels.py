@@ -139,3 +139,43 @@ def test_labels_for_another_size_and_corrupt_files(tmp_path: Path) -> None:
         load_labels(bad)
     with pytest.raises(LabelsError, match="no such file"):
         load_labels(tmp_path / "missing.json")
+
+
+def test_labels_of_another_frame_are_refused_naming_both(tmp_path: Path) -> None:
+    from tfalda_sim.evaluation.labels import labelled_frame
+
+    good = _write(tmp_path, {**GOOD, "frame": "straight-road.png"})
+    assert load_labels(good, frame=tmp_path / "straight-road.png").labels.shape == (480, 752)
+    labelled_frame(good, "straight-road.png")
+    match = (r"labels the frame 'straight-road.png', not 'start-road.png' it is applied to.*"
+             r'set "frame": "start-road.png"')
+    with pytest.raises(LabelsError, match=match):
+        load_labels(good, 752, 480, frame=tmp_path / "start-road.png")
+    with pytest.raises(LabelsError, match=match):
+        labelled_frame(good, "start-road.png")
+    unnamed = {k: v for k, v in GOOD.items() if k != "frame"}
+    assert load_labels(_write(tmp_path, unnamed), frame="any.png").labels.shape == (480, 752)
+    with pytest.raises(LabelsError, match="frame must be the labelled image's file name"):
+        load_labels(_write(tmp_path, {**GOOD, "frame": 3}), frame="any.png")
+
+
+def test_evaluate_refuses_labels_copied_to_another_frame(tmp_path: Path) -> None:
+    """A labels file copied under another frame's name scored that frame silently."""
+    import shutil
+
+    from tests.cli_helpers import tfalda
+
+    frames = tmp_path / "frames"
+    frames.mkdir()
+    shutil.copy(REFERENCE / "start-road.png", frames / "start-road.png")
+    shutil.copy(REFERENCE / "straight-road.labels.json", frames / "start-road.labels.json")
+    run = tfalda("evaluate", "--frames", frames, "--labels", frames, "--camera",
+                 "reference-car", cwd=tmp_path, code=2)
+    assert "start-road.labels.json: labels the frame 'straight-road.png', not " \
+           "'start-road.png'" in run.err, str(run)
+    # two images of one name share a labels file: the one it does not name is refused
+    shutil.copy(REFERENCE / "start-road.labels.json", frames / "start-road.labels.json")
+    cv2.imwrite(str(frames / "start-road.jpg"), cv2.imread(str(REFERENCE / "start-road.png")))
+    run = tfalda("evaluate", "--frames", frames, "--labels", frames, "--camera",
+                 "reference-car", cwd=tmp_path, code=2)
+    assert "labels the frame 'start-road.png', not 'start-road.jpg'" in run.err, str(run)
