@@ -43,6 +43,15 @@ speed_arg = speed_arg_for(MIN_CRUISE_SPEED_M_S, TOP_SPEED_M_S)
 SPEED_HELP = f"cruise speed [m/s], in [{MIN_CRUISE_SPEED_M_S:g}, {TOP_SPEED_M_S:g}]"
 
 
+def add_trust_policy_option(parser: argparse.ArgumentParser) -> None:
+    """``--trust-policy``: load a --policy file that holds pickled objects."""
+    parser.add_argument("--trust-policy", action="store_true",
+                        help="load a --policy file that holds pickled Python objects (a "
+                             "stable-baselines3 save): unpickling runs code the file's author "
+                             "chose, so only for a file from a source you trust (default: "
+                             "refused; files `tfalda-sim train` writes need no trust)")
+
+
 def register(sub: Any) -> None:
     """Add the agents' commands to the ``tfalda-sim`` subparsers."""
     _drive_parser(sub)
@@ -58,6 +67,7 @@ def _drive_parser(sub: Any) -> None:
                     "the mean |cross-track error|, departures and LIS resets.")
     dr.add_argument("--agent", choices=["pid", "ppo"], default="pid")
     dr.add_argument("--policy", type=Path, help="PPO policy .zip (default: the committed one)")
+    add_trust_policy_option(dr)
     dr.add_argument("--track", default="7",
                     help=f"a named track ({', '.join(NAMED_TRACKS)}), a generator seed or a "
                          "track file (.json, as `tfalda-sim track generate --out` writes)")
@@ -93,7 +103,7 @@ def cmd_drive(args: argparse.Namespace) -> int:
     if not track.closed:
         raise CliError(f"--track {args.track} is not a loop; laps need a closed track")
     try:
-        agent = make_agent(args.agent, args.policy, camera)
+        agent = make_agent(args.agent, args.policy, camera, trust_policy=args.trust_policy)
     except (ValueError, FileNotFoundError, ImportError) as exc:
         raise CliError(str(exc)) from None
     try:
@@ -403,6 +413,7 @@ def _evaluate_agent_parser(sub: Any) -> None:
                     "without a departure. Ctrl-C keeps the runs finished so far.")
     ev.add_argument("--agent", choices=["pid", "ppo"], default="pid")
     ev.add_argument("--policy", type=Path, help="PPO policy .zip (default: the committed one)")
+    add_trust_policy_option(ev)
     ev.add_argument("--seeds", type=seed_range_arg, default=range(*TEST_SEEDS),
                     help=f"held-out seeds A:B (default {TEST_SEEDS[0]}:{TEST_SEEDS[1]})")
     ev.add_argument("--laps", type=bounded_int_arg(1, 1000), default=3)
@@ -436,7 +447,7 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
                   inputs={"policy": args.policy, "camera": camera_input(args.camera)})
     camera = check_camera_geometry(args.camera)
     try:
-        check_agent(args.agent, args.policy, camera)
+        check_agent(args.agent, args.policy, camera, trust_policy=args.trust_policy)
     except (ValueError, FileNotFoundError, ImportError) as exc:
         raise CliError(str(exc)) from None
     jobs = len(args.seeds) * len(args.speeds)
@@ -447,7 +458,7 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
                              "laps": args.laps, "speeds": list(args.speeds),
                              "camera": args.camera},
                      jobs=evaluation_jobs(args.agent, policy, args.seeds, args.laps,
-                                          args.speeds, args.camera),
+                                          args.speeds, args.camera, args.trust_policy),
                      total=jobs, fn=run_job, record=run_record, check=check_run_record)
     resume = read_results(args.results, spec) if args.resume else None
     backend = sweep_backend(args, jobs)

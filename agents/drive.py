@@ -26,6 +26,7 @@ from tfalda_sim.tracks import Track
 from tfalda_sim.video import VideoWriter
 
 from .pid import LanePid
+from .policy_file import PolicyFileError, load_policy
 from .train import distribution_checks_off
 
 
@@ -37,43 +38,30 @@ class Agent(Protocol):
     def act(self, obs: np.ndarray) -> np.ndarray: ...
 
 
-class PolicyFileError(ValueError):
-    """A policy file that is no PPO policy the agents can drive the env with."""
-
-
 class PpoAgent:
-    """A trained stable-baselines3 PPO policy (deterministic actions)."""
+    """A trained PPO policy (deterministic actions), from a file ``tfalda-sim train`` wrote
+    (``agents/policy_file.py``: the architecture as JSON, the weights as tensors; nothing
+    is unpickled). A file with pickled objects (a stable-baselines3 save) is code when
+    loaded: refused (``UntrustedPolicyError``) unless ``trust``."""
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, trust: bool = False) -> None:
         try:
+            import stable_baselines3  # noqa: F401
             import torch
-            from stable_baselines3 import PPO
         except ImportError as exc:
             raise ImportError("the PPO agent needs the rl extra: pip install torch==2.13.0 "
                               "&& pip install -e '.[rl]'") from exc
-        path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"no policy file {path}; train one with "
-                                    "`tfalda-sim train` or use agents/policies/ppo.zip")
         # One thread: a policy this small gains nothing from more, and evaluations run
         # one process per core.
         torch.set_num_threads(1)
-        self.path = path
-        try:
-            self.model = PPO.load(path, device="cpu")
-        except (ImportError, MemoryError, OSError):  # no bad file: the CLI words them
-            raise
-        except Exception as exc:  # what SB3's zip, JSON, pickle and torch readers raise
-            reason = str(exc).removeprefix("Error: ").strip() or type(exc).__name__
-            raise PolicyFileError(
-                f"{path} is not a PPO policy saved by `tfalda-sim train` ({reason}); give the "
-                ".zip a train run wrote, or leave out --policy for the committed one") from None
+        self.path = Path(path)
+        self.policy = load_policy(self.path, trust=trust)
 
     def check_spaces(self, observation_space: Any, action_space: Any) -> None:
         """Raise ``PolicyFileError`` unless the policy takes observations and gives actions
         of the env's shapes (a policy of another env, mode or version would fail at its
         first step)."""
-        given = self.model.observation_space.shape, self.model.action_space.shape
+        given = self.policy.observation_space.shape, self.policy.action_space.shape
         if given != (observation_space.shape, action_space.shape):
             raise PolicyFileError(
                 f"{self.path} is a policy for observations of shape {given[0]} and actions of "
@@ -85,7 +73,7 @@ class PpoAgent:
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         with distribution_checks_off():  # the same action, sooner (train.py)
-            action, _ = self.model.predict(obs, deterministic=True)
+            action, _ = self.policy.predict(obs, deterministic=True)
         return np.clip(np.asarray(action, np.float32), -1.0, 1.0)
 
 
@@ -97,27 +85,28 @@ DEFAULT_POLICY = Path(__file__).resolve().parent / "policies" / "ppo.zip"
 """The committed PPO policy (see docs/agents.md for the command that trained it)."""
 
 
-def check_agent(kind: str, policy: str | Path | None = None, camera: Camera | None = None
-                ) -> None:
+def check_agent(kind: str, policy: str | Path | None = None, camera: Camera | None = None,
+                *, trust_policy: bool = False) -> None:
     """Fail now, as ``drive`` would at its start, on an agent that cannot drive the env with
     ``camera``: ``make_agent``'s errors, and a policy of other shapes than the env's
     (``PolicyFileError``)."""
-    agent = make_agent(kind, policy, camera)
+    agent = make_agent(kind, policy, camera, trust_policy=trust_policy)
     if isinstance(agent, PpoAgent):
         with contextlib.closing(TfaldaTrackEnv(camera=camera or "thesis")) as env:
             agent.check_spaces(env.observation_space, env.action_space)
 
 
-def make_agent(kind: str, policy: str | Path | None = None, camera: Camera | None = None
-               ) -> Agent:
+def make_agent(kind: str, policy: str | Path | None = None, camera: Camera | None = None,
+               *, trust_policy: bool = False) -> Agent:
     """``"pid"`` (back-projecting through ``camera``, default the thesis') or ``"ppo"``
-    (from ``policy``, default ``DEFAULT_POLICY``)."""
+    (from ``policy``, default ``DEFAULT_POLICY``). A policy file with pickled objects is
+    refused unless ``trust_policy`` (``PpoAgent``)."""
     if kind == "pid":
         if policy is not None:
             raise ValueError("--policy is for the ppo agent only")
         return LanePid(camera=camera)
     if kind == "ppo":
-        return PpoAgent(policy or DEFAULT_POLICY)
+        return PpoAgent(policy or DEFAULT_POLICY, trust=trust_policy)
     raise ValueError(f"unknown agent {kind!r}; use pid or ppo")
 
 

@@ -22,17 +22,18 @@ from tfalda_sim.tracks import generate
 
 from .drive import check_agent, drive, make_agent
 
-Job = tuple[str, str | None, int, int, float, str]
+Job = tuple[str, str | None, int, int, float, str, bool]
 
 
 def run_job(job: Job) -> dict[str, Any]:
-    """One run (agent, policy, seed, laps, speed, camera): the picklable top-level
-    function every backend runs; its result is its JSON record."""
-    kind, policy, seed, laps, speed, camera_spec = job
+    """One run (agent, policy, seed, laps, speed, camera, trust the policy's pickles): the
+    picklable top-level function every backend runs; its result is its JSON record."""
+    kind, policy, seed, laps, speed, camera_spec, trust = job
     track = generate(seed).with_elements(obstacles=())  # lane keeping: no cartons to avoid
     camera = load_camera(camera_spec)
-    result = drive(make_agent(kind, policy, camera), track, laps=laps, speed_m_s=speed,
-                   recover=False, label=f"seed {seed}", camera=camera)
+    agent = make_agent(kind, policy, camera, trust_policy=trust)
+    result = drive(agent, track, laps=laps, speed_m_s=speed, recover=False,
+                   label=f"seed {seed}", camera=camera)
     if result.ended == "interrupted":  # drive() stops at Ctrl-C; the sweep must stop too
         raise KeyboardInterrupt
     return {"seed": seed, "speed_m_s": speed, "success": result.laps_completed == laps,
@@ -40,22 +41,26 @@ def run_job(job: Job) -> dict[str, Any]:
 
 
 def evaluation_jobs(kind: str, policy: str | None, seeds: range, laps: int,
-                    speeds: tuple[float, ...], camera: str) -> Iterator[Job]:
+                    speeds: tuple[float, ...], camera: str, trust_policy: bool = False
+                    ) -> Iterator[Job]:
     """The runs, generated as they are needed: every seed at the first speed, then at the
     next."""
     for speed in speeds:
         for seed in seeds:
-            yield kind, policy, seed, laps, speed, camera
+            yield kind, policy, seed, laps, speed, camera, trust_policy
 
 
 def iter_evaluate(kind: str, seeds: range, *, laps: int = 3,
                   speeds: tuple[float, ...] = (1.5,), policy: str | None = None,
-                  workers: int = 1, camera: str = "thesis") -> Iterator[dict[str, Any]]:
+                  workers: int = 1, camera: str = "thesis", trust_policy: bool = False
+                  ) -> Iterator[dict[str, Any]]:
     """One run per (speed, seed), streamed from ``workers`` processes in that order;
-    ``camera`` a profile name or file (the workers load it)."""
-    check_agent(kind, policy, load_camera(camera))  # fail early on a bad agent or camera
-    yield from stream(run_job, evaluation_jobs(kind, policy, seeds, laps, speeds, camera),
-                      workers=workers)
+    ``camera`` a profile name or file (the workers load it); ``trust_policy`` as
+    ``make_agent``'s."""
+    # Fail early on a bad agent or camera.
+    check_agent(kind, policy, load_camera(camera), trust_policy=trust_policy)
+    yield from stream(run_job, evaluation_jobs(kind, policy, seeds, laps, speeds, camera,
+                                               trust_policy), workers=workers)
 
 
 def run_record(job: Job, run: dict[str, Any]) -> dict[str, Any]:

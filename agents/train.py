@@ -4,7 +4,8 @@
 
 Training tracks are the generated seeds of ``TRAIN_SEEDS``; ``tfalda-sim evaluate-agent``
 tests on the held-out ``TEST_SEEDS``. Writes TensorBoard logs (``OUT/tb``), checkpoints
-(``OUT/checkpoints``), the final policy (``OUT/policy.zip``) and ``OUT/train.json`` (the
+(``OUT/checkpoints``, stable-baselines3 saves), the final policy (``OUT/policy.zip``, in the
+format that loads without unpickling: ``policy_file.py``) and ``OUT/train.json`` (the
 command's arguments, the training time, the machine). Needs the ``rl`` extra.
 """
 
@@ -179,6 +180,7 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import CallbackList
 
+    from .policy_file import save_policy
     from .vec_env import make_sb3_vec_env
 
     checkpoints = _whole_checkpoints()
@@ -238,10 +240,11 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
                 if bar is not None:
                     bar.close()
             elapsed = time.perf_counter() - t0
-            # Into a file of our own: SB3 opens a path without closing it when an
-            # exception (a Ctrl-C) lands inside its writer, and the file leaks.
+            # The architecture as JSON and the weights as tensors, not SB3's pickles: a
+            # policy file must load without running code (policy_file.py). Into a file of
+            # our own: a writer cut by an exception must not leak an open file.
             with (staging / "policy.zip").open("wb") as file:
-                model.save(file)
+                save_policy(model.policy, file)
         finally:
             # Also after a Ctrl-C: the workers ignore it, and a worker that a cut message
             # leaves waiting is terminated after 5 s (TfaldaTrackVectorEnv.close).

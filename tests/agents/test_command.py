@@ -130,12 +130,20 @@ def _policy_file(kind: str, folder: Path) -> Path:
     elif kind == "cut-short":
         whole = (Path(agents.__file__).parent / "policies" / "ppo.zip").read_bytes()
         path.write_bytes(whole[:len(whole) // 2])
+    elif kind == "stable-baselines3":  # pickles: refused without --trust-policy
+        from tests.agents.policy_files import COMMITTED, sb3_save
+        from tfalda_sim.agents.policy_file import load_policy
+
+        sb3_save(load_policy(COMMITTED), path)
     else:  # a PPO policy of another env (Pendulum: observations of 3, not the lane vector)
         import gymnasium as gym
         from stable_baselines3 import PPO
 
-        PPO("MlpPolicy", gym.make("Pendulum-v1"), n_steps=64, batch_size=64,
-            device="cpu").save(path)
+        from tfalda_sim.agents.policy_file import save_policy
+
+        model = PPO("MlpPolicy", gym.make("Pendulum-v1"), n_steps=64, batch_size=64,
+                    device="cpu")
+        save_policy(model.policy, path)
     return path
 
 
@@ -143,6 +151,9 @@ def _policy_file(kind: str, folder: Path) -> Path:
     ("not-a-zip", "is not a PPO policy saved by `tfalda-sim train` (the file"),
     ("another-zip", "is not a PPO policy saved by `tfalda-sim train` ("),
     ("cut-short", "is not a PPO policy saved by `tfalda-sim train` ("),
+    ("stable-baselines3", "holds pickled Python objects (':serialized:' entries in its data, "
+                          "as stable-baselines3 saves them), and a policy file with pickled "
+                          "objects can run code when loaded; add --trust-policy"),
     ("pendulum", "is a policy for observations of shape (3,) and actions of shape (1,); the "
                  "env gives (42,)"),
 ])

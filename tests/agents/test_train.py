@@ -11,6 +11,7 @@ import torch
 from stable_baselines3 import PPO
 
 from tfalda_sim.agents.drive import PpoAgent
+from tfalda_sim.agents.policy_file import load_policy, save_policy
 from tfalda_sim.agents.train import PpoConfig, train
 from tfalda_sim.envs import TfaldaTrackEnv
 
@@ -38,7 +39,7 @@ def test_short_ppo_training_improves_the_return(tmp_path) -> None:
     # An untrained policy of the same architecture: the starting point.
     untrained = PPO("MlpPolicy", TfaldaTrackEnv(track="oval"), seed=0, device="cpu",
                     policy_kwargs={"net_arch": list(config.net_arch)})
-    untrained.save(tmp_path / "untrained.zip")
+    save_policy(untrained.policy, tmp_path / "untrained.zip")
     summary = train(6144, 1, 0, tmp_path / "run", config=config, progress=False,
                     subprocess=False, track="oval")
     assert (tmp_path / "run" / "policy.zip").is_file()
@@ -65,21 +66,51 @@ def test_training_works_with_gradients_off_and_leaves_the_mode_as_it_was(tmp_pat
 
 def test_config_reaches_the_model_and_the_run_reports_its_rate(tmp_path) -> None:
     """The exploration noise and the learning-rate decay of PpoConfig are the saved
-    model's; train.json has the rate; the caller's torch threads are left as they were."""
+    model's (the policy's and a checkpoint's); train.json has the rate; the caller's torch
+    threads are left as they were."""
     torch.set_num_threads(2)
     config = PpoConfig(n_steps=128, batch_size=64, n_epochs=1, learning_rate=1e-3,
                        log_std_init=-1.0, lr_decay=True)
     summary = train(128, 1, 0, tmp_path / "run", config=config, progress=False,
-                    subprocess=False, track="oval")
+                    subprocess=False, track="oval", checkpoint_steps=128)
     assert torch.get_num_threads() == 2
     assert summary["steps_per_s"] > 0 and summary["config"]["log_std_init"] == -1.0
-    model = PPO.load(tmp_path / "run" / "policy.zip", device="cpu")
-    assert abs(float(model.policy.log_std.detach().mean()) + 1.0) < 0.05  # one small update
+    policy = load_policy(tmp_path / "run" / "policy.zip")
+    assert abs(float(policy.log_std.detach().mean()) + 1.0) < 0.05  # one small update
+    # The schedule is training state: in SB3's checkpoint, not in the policy file.
+    model = PPO.load(tmp_path / "run" / "checkpoints" / "ppo_128_steps.zip", device="cpu")
     assert model.lr_schedule(1.0) == 1e-3 and model.lr_schedule(0.25) == 2.5e-4
 
 
+def test_train_writes_a_policy_that_loads_without_unpickling(tmp_path) -> None:
+    """policy.zip is the architecture as JSON and the weights as tensors (no SB3 pickles),
+    and holds the trained weights."""
+    import zipfile
+
+    from tfalda_sim.agents.policy_file import META_ENTRY, WEIGHTS_ENTRY
+
+    config = PpoConfig(n_steps=64, batch_size=32, n_epochs=1)
+    saved = []
+    learn = PPO.learn
+
+    def keep(self, *args, **kwargs):
+        model = learn(self, *args, **kwargs)
+        saved.append({k: v.clone() for k, v in self.policy.state_dict().items()})
+        return model
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(PPO, "learn", keep)
+        train(64, 1, 0, tmp_path / "run", config=config, progress=False, subprocess=False,
+              track="oval")
+    path = tmp_path / "run" / "policy.zip"
+    with zipfile.ZipFile(path) as z:
+        assert sorted(z.namelist()) == sorted([META_ENTRY, WEIGHTS_ENTRY])
+    state = load_policy(path).state_dict()  # trust=False
+    assert all(torch.equal(v, state[k]) for k, v in saved[0].items())
+
+
 def _saved_params(path) -> list[torch.Tensor]:
-    return [p.detach().clone() for p in PPO.load(path, device="cpu").policy.parameters()]
+    return [p.detach().clone() for p in load_policy(path).parameters()]
 
 
 def test_distribution_checks_are_off_while_training_change_no_number_and_come_back(
@@ -129,21 +160,21 @@ def test_ppo_agent_acts_the_same_with_the_checks_off_and_restores_them() -> None
     env = TfaldaTrackEnv(track="oval")
     obs, _ = env.reset(seed=0)
     seen: list[bool] = []
-    predict = agent.model.predict
+    predict = agent.policy.predict
 
     def spy(*args, **kwargs):
         seen.append(Distribution._validate_args)
         return predict(*args, **kwargs)
 
-    agent.model.predict = spy
+    agent.policy.predict = spy
     before = Distribution._validate_args
     try:
         Distribution.set_default_validate_args(True)
         fast = agent.act(obs)
         assert seen == [False] and Distribution._validate_args is True
         with torch.no_grad():
-            tensor, _ = agent.model.policy.obs_to_tensor(obs)
-            mean = agent.model.policy.get_distribution(tensor).mode()  # checks on
+            tensor, _ = agent.policy.obs_to_tensor(obs)
+            mean = agent.policy.get_distribution(tensor).mode()  # checks on
     finally:
         Distribution.set_default_validate_args(before)
     assert np.array_equal(fast, np.clip(mean.numpy().reshape(fast.shape), -1.0, 1.0))
@@ -185,22 +216,23 @@ def test_a_ctrl_c_while_the_finished_policy_is_saved_is_held(tmp_path, monkeypat
     import os
     import signal
 
+    from tfalda_sim.agents import policy_file
     from tfalda_sim.interrupts import held_stop, stop_signals_interrupt
 
-    save = PPO.save
+    save = policy_file.save_policy
 
-    def save_with_a_ctrl_c(self, *args, **kwargs):
+    def save_with_a_ctrl_c(*args, **kwargs):
         os.kill(os.getpid(), signal.SIGINT)
-        return save(self, *args, **kwargs)
+        return save(*args, **kwargs)
 
-    monkeypatch.setattr(PPO, "save", save_with_a_ctrl_c)
+    monkeypatch.setattr(policy_file, "save_policy", save_with_a_ctrl_c)
     config = PpoConfig(n_steps=64, batch_size=32, n_epochs=1)
     with stop_signals_interrupt():
         summary = train(64, 1, 0, tmp_path / "run", config=config, progress=False,
                         subprocess=False, track="oval")
         assert held_stop() == signal.SIGINT
     assert not summary["interrupted"]  # the training had finished
-    PPO.load(tmp_path / "run" / "policy.zip")  # whole
+    load_policy(tmp_path / "run" / "policy.zip")  # whole
     assert json.loads((tmp_path / "run" / "train.json").read_text())["timesteps_done"] >= 64
 
 
@@ -232,4 +264,4 @@ def test_a_ctrl_c_during_a_checkpoint_waits_for_it_then_ends_the_training(
     checkpoints = sorted((tmp_path / "run" / "checkpoints").glob("ppo_*.zip"))
     assert [c.name for c in checkpoints] == ["ppo_32_steps.zip"]
     PPO.load(checkpoints[0])  # whole
-    PPO.load(tmp_path / "run" / "policy.zip")
+    load_policy(tmp_path / "run" / "policy.zip")
