@@ -11,6 +11,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, fields, replace
 from enum import Enum
@@ -30,8 +31,9 @@ from tfalda_sim.perception.rois import initial_rois, windows
 from tfalda_sim.rendering import DomainRandomization, Effects, Renderer, Scene, build_scene
 from tfalda_sim.rendering.overlay import draw_observation
 from tfalda_sim.rendering.topdown import TopDownMap
+from tfalda_sim.timing import Timing, resolve_timing
 from tfalda_sim.tracks import NAMED_TRACKS, GeneratorParams, Track, generate, load_named
-from tfalda_sim.vehicle import MIN_CRUISE_SPEED_M_S, CarParams, ServoParams
+from tfalda_sim.vehicle import MIN_CRUISE_SPEED_M_S, CarParams
 from tfalda_sim.world import TrackPosition, World
 
 from ._checks import (
@@ -174,6 +176,10 @@ def resolve_detector(spec: object) -> DetectorConfig:
                     f"({names}) or None, got {show(spec)}")
 
 
+_TIMING_STREAM = 0x7157
+"""Second word of the timing generator's seed (beside the episode's noise seed): a
+stream of its own."""
+
 VEHICLES: tuple[str, ...] = ("kinematic", "dynamic")
 """The car models by name: the kinematic bicycle (the default) and the dynamic
 single-track car with the F1TENTH gym's tyres (``tfalda_sim.dynamics``)."""
@@ -293,8 +299,11 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
     ``car``: ``CarParams``. ``vehicle``: ``"kinematic"`` (the default: it turns as sharply
     as its wheels point at any speed), ``"dynamic"`` (the single-track car with
     magic-formula tyres that slides beyond its grip, ``tfalda_sim.dynamics``) or a
-    ``DynamicsParams``. ``servo``: the steering servo's lag and dead band, a
-    ``ServoParams`` (default: none; ``tfalda_sim.vehicle.REAL_SERVO`` a hobby servo's).
+    ``DynamicsParams``. ``timing``: the pipeline's timing and the steering servo,
+    ``"ideal"`` (the default: the observation of a step comes from that step's frame, a
+    command acts at once), ``"real-car"`` (the thesis' car: frames two periods old, a
+    servo's lag, dead band and command delay), a JSON file or a
+    ``tfalda_sim.timing.Timing``.
     ``reward``: ``RewardWeights``. ``max_laps``: an int ≥ 0, 0 =
     no limit (floats are refused, even 2.0). ``faults``: a default fault schedule for
     every episode, a list or tuple of ``tfalda_sim.faults`` faults.
@@ -334,7 +343,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
                  car: CarParams | None = None, reward: RewardWeights | None = None,
                  max_laps: int = 0, faults: Sequence[Fault] = (),
                  vehicle: str | DynamicsParams = "kinematic",
-                 servo: ServoParams | None = None) -> None:
+                 timing: str | os.PathLike[str] | Timing = "ideal") -> None:
         if render_mode is not None:
             check_choice("render_mode", render_mode, self.metadata["render_modes"],
                          optional=True)
@@ -353,8 +362,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
                                     self.car.max_speed_m_s, unit=" m/s")
         self.max_laps = check_int("max_laps", max_laps)
         self.dynamics = resolve_vehicle(vehicle)
-        self.servo = check_optional("servo", servo, ServoParams,
-                                    "a tfalda_sim.vehicle.ServoParams") or ServoParams()
+        self.timing = resolve_timing(timing)
         if self.dynamics is not None:
             self.dynamics.vector(self.car.wheelbase_m)  # its CoG between the car's axles
         self.randomization = check_optional(
@@ -446,10 +454,12 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         world = self._world
         if (world is None or world.car is not self.car
                 or world.frame_dt_s != 1.0 / self.camera.frame_rate_hz
-                or world.dynamics is not self.dynamics or world.servo is not self.servo):
+                or world.dynamics is not self.dynamics or world.servo is not self.timing.servo
+                or world.actuator_latency_s != self.timing.actuator_latency_s):
             self._track = None  # set below, once the world is on the track
             self._world = World(track, self.car, frame_rate_hz=self.camera.frame_rate_hz,
-                                dynamics=self.dynamics, servo=self.servo)
+                                dynamics=self.dynamics, servo=self.timing.servo,
+                                actuator_latency_s=self.timing.actuator_latency_s)
             self._map = None
         elif self._track != track:
             # The same car in its space: cheaper than a new one. A reset interrupted inside
@@ -489,6 +499,13 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         self._s_prev = position.s_m
         obs, frame = self._observe(self._faults.world(0, self._world))
         self._last, self._position = frame, position
+        # The pipeline's results in flight (arrival time [s], observation, frame) and the
+        # one the agent sees; its own generator, seeded from this episode's draw, so that
+        # an ideal timing draws nothing.
+        self._in_flight: deque[tuple[float, Any, _Frame]] = deque()
+        self._delivered = (obs, frame)
+        self._timing_rng = (None if self.timing.ideal else
+                            np.random.default_rng([self._noise_seed, _TIMING_STREAM]))
         return obs, self._info(frame, position)
 
     def _draw_episode(self, rng: np.random.Generator, randomize: bool
@@ -656,15 +673,16 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         if self._world is None:
             raise RuntimeError("call reset() before step()")
         camera_pose = self._simulate(self._check_action(action))
-        obs, frame = self._observe(camera_pose)
+        obs, frame = self._deliver(camera_pose)
+        new_frame = frame is not self._last
         position = self._world.position()
         progress_m = self._progress(position)
         terminated = self._is_terminated(position)
         truncated = self._is_truncated(position, terminated)
         reward = self._reward(position, progress_m, terminated)
-        self._roi_resets += bool(frame.lanes.roi_reset)
+        self._roi_resets += bool(frame.lanes.roi_reset) and new_frame
         self._last, self._position = frame, position
-        return obs, reward, terminated, truncated, self._info(frame, position)
+        return obs, reward, terminated, truncated, self._info(frame, position, new_frame)
 
     # The stages of a step, in data-flow order; each takes what it needs and returns what
     # it made.
@@ -677,6 +695,37 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
                    throttle=action[1] if self.throttle else None)
         self._step_count += 1
         return self._faults.world(self._step_count, world)
+
+    def _deliver(self, camera_pose: tuple[float, float, float]
+                 ) -> tuple[np.ndarray | dict[str, np.ndarray], _Frame]:
+        """The observation the agent gets at this step (``timing``): this step's frame
+        (ideal timing), or the newest result that has arrived — frames take
+        ``camera_latency_s`` plus up to ``jitter_s`` through the pipeline, in the order
+        they were taken, and a dropped frame never arrives."""
+        timing = self.timing
+        if timing.ideal:
+            return self._observe(camera_pose)
+        world, rng = self._world, self._timing_rng
+        assert world is not None and rng is not None
+        now = self._step_count * world.frame_dt_s
+        dropped = (timing.frame_drop_probability > 0.0
+                   and rng.random() < timing.frame_drop_probability)
+        if not dropped:
+            obs, frame = self._observe(camera_pose)
+            delay = timing.camera_latency_s + (rng.uniform(0.0, timing.jitter_s)
+                                               if timing.jitter_s > 0.0 else 0.0)
+            if self._in_flight:  # one pipeline: a result never overtakes an earlier one
+                delay = max(delay, self._in_flight[-1][0] - now)
+            self._in_flight.append((now + delay, obs, frame))
+        while self._in_flight and self._in_flight[0][0] <= now + 1e-9:
+            _, obs, frame = self._in_flight.popleft()
+            self._delivered = (obs, frame)
+        obs, frame = self._delivered
+        # An observation seen before is handed out again as a new copy (Gymnasium: the
+        # user keeps what a step returned).
+        if isinstance(obs, dict):
+            return {key: value.copy() for key, value in obs.items()}, frame
+        return obs.copy(), frame
 
     def _observe(self, camera_pose: tuple[float, float, float]
                  ) -> tuple[np.ndarray | dict[str, np.ndarray], _Frame]:
@@ -754,7 +803,8 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             return 0
         return max(0, math.floor(self._distance_m / track.length_m))
 
-    def _info(self, frame: _Frame, pos: TrackPosition) -> dict[str, Any]:
+    def _info(self, frame: _Frame, pos: TrackPosition, new_frame: bool = True
+              ) -> dict[str, Any]:
         world = self._world
         assert world is not None
         lanes = frame.lanes
@@ -771,7 +821,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             "off_road": pos.off_road,
             "collision": world.collided,
             "lis_fault_count": lanes.fault_count,
-            "roi_reset": bool(lanes.roi_reset) and self._step_count > 0,
+            "roi_reset": bool(lanes.roi_reset) and self._step_count > 0 and new_frame,
             "roi_resets": self._roi_resets,
             # np.mean's own sum and division, without its ~10 µs of checks on 8 values
             "detector_hit_rate": float(hits.sum()) / len(hits) if len(hits) else math.nan,

@@ -15,6 +15,7 @@ the track model's reverse query, with the last arc length as the hint.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,17 +69,26 @@ class World:
     any speed) or a ``DynamicsParams`` (the dynamic single-track car: it slides once
     v² / R exceeds its tyres' grip; ``mu_scale`` scales its friction, a wet patch).
     ``servo``: the steering servo's lag and dead band (default: none).
+    ``actuator_latency_s``: a command given to ``step`` acts this long after [s] (resolved
+    at physics steps; before it, the previous command still acts).
     """
 
     def __init__(self, track: Track, car: CarParams | None = None, *,
                  frame_rate_hz: float = FRAME_RATE_HZ,
                  physics_steps: int = PHYSICS_STEPS_PER_FRAME,
                  dynamics: DynamicsParams | None = None,
-                 servo: ServoParams | None = None) -> None:
+                 servo: ServoParams | None = None,
+                 actuator_latency_s: float = 0.0) -> None:
         if not (math.isfinite(frame_rate_hz) and frame_rate_hz > 0):
             raise ValueError(f"frame_rate_hz must be finite and > 0, got {frame_rate_hz}")
         if physics_steps < 1:
             raise ValueError(f"physics_steps must be ≥ 1, got {physics_steps}")
+        if not (math.isfinite(actuator_latency_s) and actuator_latency_s >= 0):
+            raise ValueError(f"actuator_latency_s must be finite and ≥ 0, got "
+                             f"{actuator_latency_s}")
+        self.actuator_latency_s = float(actuator_latency_s)
+        # Commands given and not yet superseded: (time given [s], steer, throttle).
+        self._commands: deque[tuple[float, float, float | None]] = deque()
         self.car = car or CarParams()
         self.frame_dt_s = 1.0 / frame_rate_hz
         self.physics_steps = int(physics_steps)
@@ -156,6 +166,7 @@ class World:
         self._s_hint = None
         self._servo_target = self.steer_rad
         self._set_speed_m_s = self.speed_m_s
+        self._commands = deque([(-math.inf, self.steer_rad, None)])
         self.mu_scale = 1.0
         if self._params is not None:
             self._state = kinematic_state(x, y, yaw, self.speed_m_s, self.steer_rad,
@@ -183,7 +194,12 @@ class World:
         car = self.car
         servo = self.servo
         hit = False
-        for _ in range(self.physics_steps):
+        latency = self.actuator_latency_s
+        if latency > 0.0:
+            self._commands.append((self.time_s, float(steer_command_rad), throttle))
+        for k in range(self.physics_steps):
+            if latency > 0.0:
+                steer_command_rad, throttle = self._acting(self.time_s + k * dt - latency)
             if servo.lag_s > 0.0 or servo.dead_band_rad > 0.0:
                 self._servo_target = servo_target_step(self._servo_target,
                                                        steer_command_rad, dt, servo.lag_s)
@@ -208,6 +224,13 @@ class World:
         self.time_s += self.frame_dt_s
         self.collided = self.collided or hit
         return hit
+
+    def _acting(self, given_by_s: float) -> tuple[float, float | None]:
+        """The newest command given by ``given_by_s`` (the older ones are dropped)."""
+        commands = self._commands
+        while len(commands) > 1 and commands[1][0] <= given_by_s + 1e-9:
+            commands.popleft()
+        return commands[0][1], commands[0][2]
 
     def _move_dynamic(self, throttle: float | None, dt: float) -> None:
         """The dynamic car over ``dt``: its state integrated (``dynamics.advance``) from

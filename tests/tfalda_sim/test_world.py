@@ -292,3 +292,33 @@ def test_a_pickled_dynamic_world_drives_on_the_same() -> None:
     world.step(0.1)
     clone.step(0.1)
     assert clone.pose == world.pose
+
+
+@pytest.mark.parametrize("frames", [1, 2, 3])
+def test_actuator_latency_delays_the_commands_by_exactly_the_set_time(frames: int) -> None:
+    """With a latency of k frames the wheel angle (and so the pose) after frame t is the
+    latency-free world's after frame t − k, for any command sequence."""
+    track = load_named("oval")
+    ideal = World(track)
+    late = World(track, actuator_latency_s=frames / 50.0)
+    commands = [0.3 * math.sin(0.3 * t) + 0.1 * (t % 3) for t in range(40)]
+    for world in (ideal, late):
+        world.reset((0.0, 0.0, 0.0), speed_m_s=1.0, steer_rad=0.0)
+    ideal_steer, late_steer = [], []
+    for command in commands:
+        ideal.step(command)
+        late.step(command)
+        ideal_steer.append(ideal.steer_rad)
+        late_steer.append(late.steer_rad)
+    assert late_steer[:frames] == [0.0] * frames
+    assert late_steer[frames:] == pytest.approx(ideal_steer[:-frames], abs=1e-12)
+
+
+def test_half_a_frame_of_actuator_latency_acts_mid_frame() -> None:
+    world = World(load_named("oval"), actuator_latency_s=0.01)  # 2 of 4 physics steps
+    world.reset((0.0, 0.0, 0.0), speed_m_s=1.0)
+    world.step(0.3)
+    # Two physics steps of 5 ms at the servo's rate, not four.
+    assert world.steer_rad == pytest.approx(2 * 0.005 * world.car.max_steer_rate_rad_s)
+    with pytest.raises(ValueError, match="actuator_latency_s"):
+        World(load_named("oval"), actuator_latency_s=-0.01)
