@@ -300,6 +300,19 @@ def _cmd_train_rllib(args: argparse.Namespace) -> int:
     return 0
 
 
+def _faults_arg(text: str) -> list[str]:
+    from .stress import check_fault_names
+
+    names = [f.strip() for f in text.split(",") if f.strip()]
+    repeated = [f for k, f in enumerate(names) if f in names[:k]]
+    if repeated:  # its runs would be made twice and pooled with themselves
+        raise argparse.ArgumentTypeError(f"{repeated[0]} is named twice: {text[:60]!r}")
+    try:
+        return check_fault_names(names)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _stress_parser(sub: Any) -> None:
     from .stress import FAULTS
 
@@ -311,7 +324,7 @@ def _stress_parser(sub: Any) -> None:
                                     "the finished runs and their summary.")
     st.add_argument("--seeds", type=seed_range_arg, default=range(10_000, 10_010),
                     help="generated tracks A:B")
-    st.add_argument("--faults", default=",".join(FAULTS),
+    st.add_argument("--faults", type=_faults_arg, default=",".join(FAULTS),
                     help=f"comma-separated subset of: {', '.join(FAULTS)}")
     add_sweep_options(st, "runs")
     st.add_argument("--out", type=Path, default=Path("out/stress"),
@@ -331,7 +344,6 @@ def cmd_stress(args: argparse.Namespace) -> int:
         StressRun,
         StressTally,
         battery_jobs,
-        check_fault_names,
         check_run_record,
         markdown_table,
         plot,
@@ -341,10 +353,7 @@ def cmd_stress(args: argparse.Namespace) -> int:
     )
 
     check_sweep_options(args)
-    try:
-        faults = check_fault_names([f.strip() for f in args.faults.split(",") if f.strip()])
-    except ValueError as exc:
-        raise CliError(str(exc)) from None
+    faults = args.faults
     # --resume replaces the report of the run it continues (and its --results file).
     check_outputs({"out": args.out, "results": args.results},
                   {"out": DIRECTORY, "results": ".jsonl"}, args.force or args.resume,
@@ -398,9 +407,13 @@ def cmd_stress(args: argparse.Namespace) -> int:
 
 def _speeds_arg(text: str) -> tuple[float, ...]:
     try:
-        return tuple(speed_arg(v.strip()) for v in text.split(","))
+        speeds = tuple(speed_arg(v.strip()) for v in text.split(","))
     except argparse.ArgumentTypeError as exc:
         raise argparse.ArgumentTypeError(f"--speeds: {exc}") from None
+    repeated = [v for k, v in enumerate(speeds) if v in speeds[:k]]
+    if repeated:  # its runs would be made twice and pooled with themselves
+        raise argparse.ArgumentTypeError(f"{repeated[0]:g} m/s is named twice: {text[:60]!r}")
+    return speeds
 
 
 def _evaluate_agent_parser(sub: Any) -> None:

@@ -57,6 +57,9 @@ def iter_evaluate(kind: str, seeds: range, *, laps: int = 3,
     """One run per (speed, seed), streamed from ``workers`` processes in that order;
     ``camera`` a profile name or file (the workers load it); ``trust_policy`` as
     ``make_agent``'s."""
+    repeated = [v for k, v in enumerate(speeds) if v in speeds[:k]]
+    if repeated:  # its runs would be made twice and pooled with themselves
+        raise ValueError(f"{repeated[0]:g} m/s is named twice in speeds {speeds}")
     # Fail early on a bad agent or camera.
     check_agent(kind, policy, load_camera(camera), trust_policy=trust_policy)
     yield from stream(run_job, evaluation_jobs(kind, policy, seeds, laps, speeds, camera,

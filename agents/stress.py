@@ -215,12 +215,16 @@ def check_run_record(job: StressJob, rec: dict[str, Any]) -> None:
 
 def check_fault_names(faults: Sequence[str] | None) -> list[str]:
     """The names of the stress battery's faults to run (default: the whole battery);
-    unknown names refused (ValueError)."""
+    unknown names refused (ValueError), and a name given twice (its runs would be made
+    twice and pooled with themselves)."""
     names = list(FAULTS if faults is None else faults)
     unknown = [f for f in names if f not in FAULTS]
     if unknown or not names:
         raise ValueError(f"unknown fault(s) {', '.join(unknown) or '(none given)'}; "
                          f"known: {', '.join(FAULTS)}")
+    repeated = [f for k, f in enumerate(names) if f in names[:k]]
+    if repeated:
+        raise ValueError(f"{repeated[0]} is named twice")
     return names
 
 
