@@ -363,6 +363,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         self.max_laps = check_int("max_laps", max_laps)
         self.dynamics = resolve_vehicle(vehicle)
         self.timing = resolve_timing(timing)
+        self.episode_timing = self.timing  # this episode's (drawn with randomisation)
         if self.dynamics is not None:
             self.dynamics.vector(self.car.wheelbase_m)  # its CoG between the car's axles
         self.randomization = check_optional(
@@ -454,12 +455,10 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         world = self._world
         if (world is None or world.car is not self.car
                 or world.frame_dt_s != 1.0 / self.camera.frame_rate_hz
-                or world.dynamics is not self.dynamics or world.servo is not self.timing.servo
-                or world.actuator_latency_s != self.timing.actuator_latency_s):
+                or world.dynamics is not self.dynamics):
             self._track = None  # set below, once the world is on the track
             self._world = World(track, self.car, frame_rate_hz=self.camera.frame_rate_hz,
-                                dynamics=self.dynamics, servo=self.timing.servo,
-                                actuator_latency_s=self.timing.actuator_latency_s)
+                                dynamics=self.dynamics)
             self._map = None
         elif self._track != track:
             # The same car in its space: cheaper than a new one. A reset interrupted inside
@@ -489,6 +488,16 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
 
         start = opts.start
         pose = self._start_pose(track, start, rng)
+        # This episode's timing (drawn with domain randomisation) and its generator,
+        # seeded from this episode's draw: an ideal timing draws nothing.
+        timing_ranges = self.randomization.timing if randomize else None
+        self._timing_rng = (
+            None if self.timing.ideal and timing_ranges is None else
+            np.random.default_rng([self._noise_seed, _TIMING_STREAM]))
+        self.episode_timing = (self.timing if timing_ranges is None else
+                               timing_ranges.sample(self._timing_rng))
+        self._world.servo = self.episode_timing.servo
+        self._world.actuator_latency_s = self.episode_timing.actuator_latency_s
         self._world.reset(pose, speed)
         if self._world.collided:
             raise StartInCarton(f"the start pose {start} is inside a carton; choose another")
@@ -500,12 +509,9 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         obs, frame = self._observe(self._faults.world(0, self._world))
         self._last, self._position = frame, position
         # The pipeline's results in flight (arrival time [s], observation, frame) and the
-        # one the agent sees; its own generator, seeded from this episode's draw, so that
-        # an ideal timing draws nothing.
+        # one the agent sees.
         self._in_flight: deque[tuple[float, Any, _Frame]] = deque()
         self._delivered = (obs, frame)
-        self._timing_rng = (None if self.timing.ideal else
-                            np.random.default_rng([self._noise_seed, _TIMING_STREAM]))
         return obs, self._info(frame, position)
 
     def _draw_episode(self, rng: np.random.Generator, randomize: bool
@@ -702,7 +708,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         (ideal timing), or the newest result that has arrived — frames take
         ``camera_latency_s`` plus up to ``jitter_s`` through the pipeline, in the order
         they were taken, and a dropped frame never arrives."""
-        timing = self.timing
+        timing = self.episode_timing
         if timing.ideal:
             return self._observe(camera_pose)
         world, rng = self._world, self._timing_rng
@@ -750,11 +756,18 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             self._faults.image(step, [image], [(0, 0, image.shape[1], image.shape[0])])
             lanes = det.process(image)
         frame = _Frame(lanes=lanes, camera_pose=camera_pose, step=step, image=image)
+        speed, steer = world.speed_m_s, world.steer_rad
+        timing = self.episode_timing
+        if timing.speed_noise_m_s > 0.0 or timing.steer_noise_rad > 0.0:
+            rng = self._timing_rng
+            assert rng is not None
+            speed += timing.speed_noise_m_s * float(rng.standard_normal())
+            steer += timing.steer_noise_rad * float(rng.standard_normal())
         vector = lane_vector(lanes, image_width=self.camera.width,
                              image_height=self.camera.height,
                              fault_limit=self.detector_config.lis.fault_limit,
-                             speed_ratio=world.speed_m_s / self.car.max_speed_m_s,
-                             steer_ratio=world.steer_rad / self.car.max_steer_rad)
+                             speed_ratio=speed / self.car.max_speed_m_s,
+                             steer_ratio=steer / self.car.max_steer_rad)
         if self.observation_mode is ObservationMode.LANES:
             return vector, frame
         pixels = image[..., None]  # type: ignore[index]

@@ -15,6 +15,8 @@ import os
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
+import numpy as np
+
 from .vehicle import REAL_SERVO, ServoParams
 
 CAMERA_FRAME_PERIOD_S: float = 1.0 / 50.0
@@ -42,6 +44,10 @@ REAL_ACTUATOR_LATENCY_S: float = 0.5 * SERVO_PULSE_PERIOD_S
 """Delay from a command to the servo acting on it [s]: half a pulse period on average
 (the command waits for the next pulse)."""
 
+_NOISE_BOUNDS = {"speed_noise_m_s": 2.0, "steer_noise_rad": 0.5}
+"""Largest odometry noise accepted (a quarter of the top speed [m/s]; more than the
+steering range [rad])."""
+
 MAX_LATENCY_S: float = 1.0
 """Longest latency accepted [s]: 50 frames of the thesis camera; beyond it no car
 drives."""
@@ -62,6 +68,11 @@ class Timing:
     the last one."""
     jitter_s: float = 0.0
     """Extra delay of each frame's result, uniform in [0, jitter_s] [s]."""
+    speed_noise_m_s: float = 0.0
+    """Standard deviation of the odometry's speed in an observation [m/s] (Gaussian,
+    per frame)."""
+    steer_noise_rad: float = 0.0
+    """Standard deviation of the odometry's wheel angle in an observation [rad]."""
     servo: ServoParams = field(default_factory=ServoParams)
     """The steering servo's lag and dead band."""
 
@@ -78,15 +89,21 @@ class Timing:
             if f.name == "frame_drop_probability":
                 if not 0.0 <= value < 1.0:
                     raise ValueError(f"Timing.{f.name} must lie in [0, 1), got {value!r}")
+            elif f.name in _NOISE_BOUNDS:
+                if not 0.0 <= value <= _NOISE_BOUNDS[f.name]:
+                    raise ValueError(f"Timing.{f.name} must lie in [0, "
+                                     f"{_NOISE_BOUNDS[f.name]}], got {value!r}")
             elif not 0.0 <= value <= MAX_LATENCY_S:
                 raise ValueError(f"Timing.{f.name} must lie in [0, {MAX_LATENCY_S}] s, got "
                                  f"{value!r}")
 
     @property
     def ideal(self) -> bool:
-        """No latency, drop or jitter (the observation of a step is that step's)."""
+        """No latency, drop, jitter or noise (the observation of a step is that step's,
+        exactly)."""
         return (self.camera_latency_s == 0.0 and self.frame_drop_probability == 0.0
-                and self.jitter_s == 0.0)
+                and self.jitter_s == 0.0 and self.speed_noise_m_s == 0.0
+                and self.steer_noise_rad == 0.0)
 
 
 TIMINGS: dict[str, Timing] = {
@@ -139,3 +156,33 @@ def resolve_timing(spec: object) -> Timing:
         return load_timing(spec)
     raise ValueError(f"timing must be one of {', '.join(TIMINGS)}, a .json timing file or "
                      f"a tfalda_sim.timing.Timing, got {spec!r}")
+
+
+@dataclass(frozen=True)
+class TimingRandomization:
+    """Ranges ``(low, high)`` from which ``sample`` draws a ``Timing`` per episode (the
+    env's ``DomainRandomization.timing``): around the real car's, from none to about
+    half again as much."""
+
+    camera_latency_s: tuple[float, float] = (0.0, 0.06)
+    actuator_latency_s: tuple[float, float] = (0.0, 0.02)
+    frame_drop_probability: tuple[float, float] = (0.0, 0.05)
+    jitter_s: tuple[float, float] = (0.0, 0.02)
+    speed_noise_m_s: tuple[float, float] = (0.0, 0.05)
+    steer_noise_rad: tuple[float, float] = (0.0, 0.01)
+    servo_lag_s: tuple[float, float] = (0.0, 0.03)
+    servo_dead_band_rad: tuple[float, float] = (0.0, 0.006)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            low, high = getattr(self, f.name)
+            if not (math.isfinite(low) and math.isfinite(high) and 0.0 <= low <= high):
+                raise ValueError(f"TimingRandomization.{f.name} must be a range (low, high) "
+                                 f"with 0 ≤ low ≤ high, got {(low, high)!r}")
+
+    def sample(self, rng: np.random.Generator) -> Timing:
+        """Draw one ``Timing`` with ``rng``, its fields in declaration order."""
+        v = {f.name: float(rng.uniform(*getattr(self, f.name))) for f in fields(self)}
+        servo = ServoParams(lag_s=v.pop("servo_lag_s"),
+                            dead_band_rad=v.pop("servo_dead_band_rad"))
+        return Timing(**v, servo=servo)

@@ -106,3 +106,40 @@ def test_bad_timing_values_are_refused() -> None:
         Timing(actuator_latency_s=float("nan"))
     with pytest.raises(ValueError, match="timing must be one of"):
         TfaldaTrackEnv(timing="laggy")
+
+
+def test_odometry_noise_is_seeded_and_only_on_speed_and_steering() -> None:
+    noisy = Timing(speed_noise_m_s=0.05, steer_noise_rad=0.01)
+    ideal, _ = _observations(TfaldaTrackEnv(), seed=2)
+    a, _ = _observations(TfaldaTrackEnv(timing=noisy), seed=2)
+    b, _ = _observations(TfaldaTrackEnv(timing=noisy), seed=2)
+    assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    for x, y in zip(a, ideal, strict=True):
+        assert np.array_equal(x[:-2], y[:-2])  # the lanes: as without noise
+        assert not np.array_equal(x[-2:], y[-2:])  # speed, steering: noisy
+
+
+def test_domain_randomization_draws_a_timing_per_episode_by_seed() -> None:
+    from tfalda_sim.rendering import DomainRandomization
+    from tfalda_sim.timing import TimingRandomization
+
+    def timings(seed: int) -> list[Timing]:
+        env = TfaldaTrackEnv(domain_randomization=True, randomization=DomainRandomization(
+            timing=TimingRandomization()))
+        env.reset(seed=seed)
+        out = [env.episode_timing]
+        for _ in range(3):
+            env.reset()
+            out.append(env.episode_timing)
+        return out
+
+    a = timings(3)
+    assert a == timings(3) and a != timings(4)
+    assert len(set(a)) == 4 and all(t.camera_latency_s <= 0.06 for t in a)
+    assert all(t.servo.lag_s > 0 for t in a)
+    # Without timing ranges the randomised env keeps its timing and draws as before.
+    env = TfaldaTrackEnv(domain_randomization=True, timing="real-car")
+    env.reset(seed=3)
+    assert env.episode_timing is TIMINGS["real-car"]
+    with pytest.raises(ValueError, match="camera_latency_s must be a range"):
+        TimingRandomization(camera_latency_s=(0.05, 0.01))

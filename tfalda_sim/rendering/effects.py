@@ -13,6 +13,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from tfalda_sim.timing import TimingRandomization
+
 
 @dataclass(frozen=True)
 class Effects:
@@ -93,11 +95,17 @@ class DomainRandomization:
     wear: tuple[float, float] = (0.0, 0.6)
     bonnet_dn: tuple[float, float] = (8.0, 40.0)
     bonnet_reflectivity: tuple[float, float] = (0.0, 0.25)
+    timing: TimingRandomization | None = None
+    """The pipeline's timing, drawn per episode by the env (from a generator seeded from
+    ``np_random``; ``sample`` draws only the photometric effects): None keeps the env's
+    ``timing``."""
 
     def sample(self, rng: np.random.Generator) -> Effects:
         """Draw one ``Effects`` from the ranges with ``rng`` (the env's ``np_random``)."""
         values: dict[str, float | int] = {}
         for f in fields(self):
+            if f.name == "timing":
+                continue
             lo, hi = getattr(self, f.name)
             if isinstance(lo, int) and isinstance(hi, int):
                 values[f.name] = int(rng.integers(lo, hi + 1))
