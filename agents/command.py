@@ -406,10 +406,8 @@ def cmd_stress(args: argparse.Namespace) -> int:
 
 
 def _speeds_arg(text: str) -> tuple[float, ...]:
-    try:
-        speeds = tuple(speed_arg(v.strip()) for v in text.split(","))
-    except argparse.ArgumentTypeError as exc:
-        raise argparse.ArgumentTypeError(f"--speeds: {exc}") from None
+    # speed_arg's error is argparse's: it reads "argument --speeds: expected …".
+    speeds = tuple(speed_arg(v.strip()) for v in text.split(","))
     repeated = [v for k, v in enumerate(speeds) if v in speeds[:k]]
     if repeated:  # its runs would be made twice and pooled with themselves
         raise argparse.ArgumentTypeError(f"{repeated[0]:g} m/s is named twice: {text[:60]!r}")
@@ -431,7 +429,8 @@ def _evaluate_agent_parser(sub: Any) -> None:
                     help=f"held-out seeds A:B (default {TEST_SEEDS[0]}:{TEST_SEEDS[1]})")
     ev.add_argument("--laps", type=bounded_int_arg(1, 1000), default=3)
     ev.add_argument("--speeds", type=_speeds_arg, default=(1.5,),
-                    help="comma-separated cruise speeds [m/s], each in (0, top speed]")
+                    help=f"comma-separated cruise speeds [m/s], each in "
+                         f"[{MIN_CRUISE_SPEED_M_S:g}, {TOP_SPEED_M_S:g}]")
     add_sweep_options(ev, "runs")
     add_camera_option(ev)
     ev.add_argument("--out", type=Path, help="also write the JSON here")

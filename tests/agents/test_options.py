@@ -36,3 +36,26 @@ def test_the_python_api_refuses_repeated_speeds_and_faults() -> None:
         check_fault_names(["blackout", "glare", "blackout"])
     with pytest.raises(ValueError, match=r"1\.5 m/s is named twice"):
         next(iter_evaluate("pid", range(1), speeds=(1.5, 1.5)))
+
+
+@pytest.mark.parametrize("argv, option", [
+    (["evaluate-agent", "--speeds", "0.01"], "--speeds"),
+    (["evaluate-agent", "--speeds", "1.5,9"], "--speeds"),
+    (["drive", "--speed", "0.01"], "--speed"),
+    (["train", "--speed", "0.01"], "--speed"),
+])
+def test_a_speed_out_of_range_is_refused_with_the_range_the_help_gives(
+        argv: list[str], option: str, tmp_path: Path) -> None:
+    """The help said (0, top speed] while the check took [0.05, 8.3], and the error named
+    --speeds twice ("argument --speeds: --speeds: …")."""
+    from tfalda_sim.agents.command import TOP_SPEED_M_S
+    from tfalda_sim.vehicle import MIN_CRUISE_SPEED_M_S
+
+    span = f"[{MIN_CRUISE_SPEED_M_S:g}, {TOP_SPEED_M_S:g}]"
+    error = tfalda(*argv, cwd=tmp_path, code=2).err.strip().splitlines()[-1]
+    assert f"argument {option}: expected a number in {span} m/s" in error, error
+    assert error.count(option) == 1, error
+    help_text = " ".join(tfalda(argv[0], "--help", cwd=tmp_path).out.split())
+    options = help_text[help_text.index("options:"):]
+    entry = options[options.index(f"{option} {option.strip('-').upper()}"):]
+    assert entry.split(" --")[0].count(span) == 1, entry[:200]
