@@ -231,18 +231,52 @@ def _address_hint(client: bool) -> str:
             "6379 unless it was told otherwise), or \"auto\" on a node of the cluster")
 
 
-def check_ray_address(address: str) -> None:
-    """Raise ``RayUnavailable`` if ``address`` (``HOST:PORT`` or ``ray://HOST:PORT``; an
-    IPv6 host in brackets) cannot be connected to: a host name that is not one or does not
-    resolve, a port that is no number or out of range, a refused connection or none within
-    ``RAY_CONNECT_TIMEOUT_S``. Other forms (``"auto"``, a bare IPv6 address, …) are
-    ``ray.init``'s to read."""
+def _split_ray_address(address: str) -> tuple[str, str]:
+    """``(host, port)`` of ``HOST:PORT`` or ``ray://HOST:PORT`` (an IPv6 host in brackets),
+    or ``RayUnavailable`` naming what keeps ``address`` from being one. Checked here: Ray
+    answers a malformed address with advice about its own command line (an ``--address``
+    flag, ``RAY_ADDRESS``) or, for a web address, with a list cut at its first line."""
     client = address.startswith("ray://")
-    host, sep, port = address.removeprefix("ray://").rpartition(":")
-    bracketed = host.startswith("[") and host.endswith("]")
-    host = host[1:-1] if bracketed else host
-    if not sep or not host or not port or (":" in host and not bracketed):
+
+    def malformed(why: str) -> RayUnavailable:
+        return RayUnavailable(f"--ray-address {address!r} is not a Ray cluster address: {why}; "
+                              f"{_address_hint(client)}")
+
+    scheme, sep, rest = address.partition("://")
+    if sep and scheme != "ray":
+        raise malformed(f"{scheme[:20]}:// is a web address (a dashboard's or the Jobs API's), "
+                        "not the cluster's")
+    rest = rest if sep else address
+    if rest.startswith("["):
+        host, closed, tail = rest[1:].partition("]")
+        if not closed:
+            raise malformed("the bracket of the IPv6 host is not closed")
+        if tail and not tail.startswith(":"):
+            raise malformed("after the IPv6 host's bracket comes :PORT")
+        port = tail[1:]
+    else:
+        host, colon, port = rest.rpartition(":")
+        if not colon:
+            host, port = rest, ""
+        if ":" in host:
+            raise malformed(f"an IPv6 host goes in brackets: [{rest[:60]}]:PORT")
+    if not host:
+        raise malformed("no host")
+    if not port:
+        raise malformed("no port")
+    return host, port
+
+
+def check_ray_address(address: str) -> None:
+    """Raise ``RayUnavailable`` if ``address`` cannot be connected to: not of the form
+    ``HOST:PORT`` or ``ray://HOST:PORT`` (an IPv6 host in brackets) nor ``"auto"`` or
+    ``"local"``, a host name that is not one or does not resolve, a port that is no number
+    or out of range, a refused connection or none within ``RAY_CONNECT_TIMEOUT_S``.
+    ``"auto"`` (the cluster this node belongs to) is ``ray.init``'s to find."""
+    if address in ("auto", "local"):
         return
+    client = address.startswith("ray://")
+    host, port = _split_ray_address(address)
 
     def unreachable(reason: str) -> RayUnavailable:
         return RayUnavailable(f"could not connect to the Ray cluster at {address}: {reason}; "
@@ -273,6 +307,22 @@ def _call(fn: Callable[[J], R], job: J) -> R:
     return fn(job)
 
 
+def _init_failure(address: str | None, exc: BaseException) -> str:
+    """One line for a ``ray.init`` that failed: Ray's first sentence (the rest is advice
+    for Ray's own command line: its ``--address`` flag, ``RAY_ADDRESS``), then ours."""
+    text = str(exc).strip()
+    first = text.splitlines()[0] if text else type(exc).__name__
+    if address is None:
+        return f"could not start a local Ray: {first}"
+    if address == "auto" and isinstance(exc, ConnectionError):
+        return ("could not connect to the Ray cluster at auto: no Ray runs on this machine "
+                "(\"auto\" joins the cluster of this node); start one here with `ray start "
+                "--head`, or give the head node's HOST:PORT")
+    first = first.split(". ")[0].rstrip(".:")
+    return (f"could not connect to the Ray cluster at {address}: {first}; "
+            f"{_address_hint(address.startswith('ray://'))}")
+
+
 def _start_ray(ray: Any, workers: int | None, address: str | None) -> bool:
     """Connect to ``address`` or start a local Ray with ``workers`` CPUs; True if this call
     started (and so must shut down) it. An already connected Ray is used as it is."""
@@ -296,10 +346,7 @@ def _start_ray(ray: Any, workers: int | None, address: str | None) -> bool:
     except (ConnectionError, RuntimeError, ValueError, TimeoutError) as exc:
         with contextlib.suppress(Exception):
             ray.shutdown()  # a half-made connection
-        where = f"the Ray cluster at {address}" if address else "a local Ray"
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise RayUnavailable(f"could not {'connect to' if address else 'start'} {where}: "
-                             f"{first}") from None
+        raise RayUnavailable(_init_failure(address, exc)) from None
     finally:
         for sig, handler in saved.items():
             if handler is not None:

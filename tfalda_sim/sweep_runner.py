@@ -125,8 +125,9 @@ def add_sweep_options(parser: argparse.ArgumentParser, what: str = "jobs") -> No
                         help="where the jobs run: local processes (default) or Ray (the "
                              "optional extra: pip install 'tfalda-sim[ray]')")
     parser.add_argument("--ray-address", metavar="ADDR",
-                        help="with --backend ray: a running Ray cluster (default: start a "
-                             "local Ray with --workers CPUs for this sweep)")
+                        help="with --backend ray: a running Ray cluster, HOST:PORT of its head "
+                             "node, ray://HOST:PORT or auto (default: start a local Ray with "
+                             "--workers CPUs for this sweep)")
     parser.add_argument("--results", type=Path, metavar="F.jsonl",
                         help="stream each finished job's result to this JSON Lines file (first "
                              "line: the sweep's configuration), so --resume can continue it; "
