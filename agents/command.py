@@ -40,7 +40,9 @@ TOP_SPEED_M_S: float = CarParams().max_speed_m_s
 """The car's top speed: every ``--speed`` of these commands lies below it [m/s]."""
 
 speed_arg = speed_arg_for(MIN_CRUISE_SPEED_M_S, TOP_SPEED_M_S)
-SPEED_HELP = f"cruise speed [m/s], in [{MIN_CRUISE_SPEED_M_S:g}, {TOP_SPEED_M_S:g}]"
+SPEED_HELP = (f"cruise speed [m/s], in [{MIN_CRUISE_SPEED_M_S:g}, {TOP_SPEED_M_S:g}] "
+              "(default: %(default)s)")
+AGENT_HELP = "the PID lane keeper or a PPO policy (--policy) (default: %(default)s)"
 
 
 def add_trust_policy_option(parser: argparse.ArgumentParser) -> None:
@@ -65,22 +67,26 @@ def _drive_parser(sub: Any) -> None:
         "drive", help="drive laps with the PID or a PPO policy (closed loop)",
         description="An agent steers the car from the TFALDA + LIS lanes; prints lap times, "
                     "the mean |cross-track error|, departures and LIS resets.")
-    dr.add_argument("--agent", choices=["pid", "ppo"], default="pid")
+    dr.add_argument("--agent", choices=["pid", "ppo"], default="pid", help=AGENT_HELP)
     dr.add_argument("--policy", type=Path, help="PPO policy .zip (default: the committed one)")
     add_trust_policy_option(dr)
     dr.add_argument("--track", default="7",
                     help=f"a named track ({', '.join(NAMED_TRACKS)}), a generator seed or a "
-                         "track file (.json, as `tfalda-sim track generate --out` writes)")
-    dr.add_argument("--laps", type=positive_int_arg, default=2)
+                         "track file (.json, as `tfalda-sim track generate --out` writes) "
+                         "(default: %(default)s, a generated track)")
+    dr.add_argument("--laps", type=positive_int_arg, default=2,
+                    help="laps to drive from the start line (default: %(default)s)")
     dr.add_argument("--speed", type=speed_arg, default=1.5, help=SPEED_HELP)
     dr.add_argument("--obstacles", action="store_true",
                     help="keep the track's cartons, a generated track's or a track file's "
                          "(the agents do not avoid them)")
     dr.add_argument("--no-recover", action="store_true",
                     help="end the drive at the first departure (default: put the car back)")
-    dr.add_argument("--video", type=Path, help="MP4 of the drive with ROIs, lanes and a map")
+    dr.add_argument("--video", type=Path,
+                    help="MP4 of the drive with ROIs, lanes and a map (default: none)")
     dr.add_argument("--camera-video", type=Path,
-                    help="MP4 of the bare grey camera frames (for tfalda-sim replay)")
+                    help="MP4 of the bare grey camera frames, for tfalda-sim replay "
+                         "(default: none)")
     add_camera_option(dr)
     add_force_option(dr, "existing videos")
     add_json_option(dr)
@@ -181,23 +187,27 @@ def _train_parser(sub: Any) -> None:
     tr.add_argument("--backend", choices=TRAIN_BACKENDS, default="sb3",
                     help="stable-baselines3 on this machine (default) or RLlib on Ray")
     tr.add_argument("--timesteps", type=bounded_int_arg(1, 10**12), default=1_000_000,
-                    help="env steps to train for (rllib: whole iterations of --train-batch)")
+                    help="env steps to train for (rllib: whole iterations of --train-batch) "
+                         "(default: %(default)s)")
     tr.add_argument("--n-envs", type=bounded_int_arg(1, MAX_N_ENVS),
-                    help=f"sb3: envs stepped in parallel, one process each (1–{MAX_N_ENVS}, "
-                         "default 2)")
+                    help=f"sb3: envs stepped in parallel, one process each (1–{MAX_N_ENVS}) "
+                         "(default: 2)")
     tr.add_argument("--env-runners", type=bounded_int_arg(0, MAX_ENV_RUNNERS),
                     help=f"rllib: Ray actors sampling the env, one CPU each (0–"
-                         f"{MAX_ENV_RUNNERS}, default 2; 0: sample in this process)")
+                         f"{MAX_ENV_RUNNERS}; 0: sample in this process) (default: 2)")
     tr.add_argument("--train-batch", type=bounded_int_arg(1, MAX_TRAIN_BATCH),
                     help=f"rllib: env steps collected per training iteration (1–"
-                         f"{MAX_TRAIN_BATCH}, default 2048)")
+                         f"{MAX_TRAIN_BATCH}) (default: 2048)")
     tr.add_argument("--ray-address", metavar="ADDR",
                     help="rllib: a running Ray cluster, 'auto' or HOST:PORT (default: start a "
                          "local Ray with --env-runners CPUs for this run)")
-    tr.add_argument("--seed", type=seed_arg, default=0)
+    tr.add_argument("--seed", type=seed_arg, default=0,
+                    help="seed of the network's initialisation, the exploration and the "
+                         "training tracks' order (default: %(default)s)")
     tr.add_argument("--speed", type=speed_arg, default=1.5, help=SPEED_HELP)
     tr.add_argument("--out", type=Path,
-                    help="folder for the run (default runs/ppo with sb3, runs/rllib with rllib)")
+                    help="folder for the run (default: runs/ppo with sb3, runs/rllib with "
+                         "rllib)")
     tr.add_argument("--force", action="store_true",
                     help="write into a folder that holds an earlier run: its policy.zip or "
                          "checkpoint/, train.json and same-named checkpoints are replaced, its "
@@ -323,12 +333,13 @@ def _stress_parser(sub: Any) -> None:
                                     "stream to OUT/stress.jsonl as they finish; Ctrl-C keeps "
                                     "the finished runs and their summary.")
     st.add_argument("--seeds", type=seed_range_arg, default=range(10_000, 10_010),
-                    help="generated tracks A:B")
+                    help="generated tracks A:B (default: 10000:10010)")
     st.add_argument("--faults", type=_faults_arg, default=",".join(FAULTS),
-                    help=f"comma-separated subset of: {', '.join(FAULTS)}")
+                    help=f"comma-separated subset of: {', '.join(FAULTS)} (default: all)")
     add_sweep_options(st, "runs")
     st.add_argument("--out", type=Path, default=Path("out/stress"),
-                    help="folder for stress.jsonl, stress.json, stress.md and stress.png")
+                    help="folder for stress.jsonl, stress.json, stress.md and stress.png "
+                         "(default: %(default)s)")
     add_camera_option(st)
     add_force_option(st, "an earlier report in --out")
     add_json_option(st)
@@ -422,18 +433,21 @@ def _evaluate_agent_parser(sub: Any) -> None:
         description="The PID or a PPO policy drives each held-out generated track (cartons "
                     "removed) from its start line; a run succeeds when the laps are done "
                     "without a departure. Ctrl-C keeps the runs finished so far.")
-    ev.add_argument("--agent", choices=["pid", "ppo"], default="pid")
+    ev.add_argument("--agent", choices=["pid", "ppo"], default="pid", help=AGENT_HELP)
     ev.add_argument("--policy", type=Path, help="PPO policy .zip (default: the committed one)")
     add_trust_policy_option(ev)
     ev.add_argument("--seeds", type=seed_range_arg, default=range(*TEST_SEEDS),
-                    help=f"held-out seeds A:B (default {TEST_SEEDS[0]}:{TEST_SEEDS[1]})")
-    ev.add_argument("--laps", type=bounded_int_arg(1, 1000), default=3)
+                    help=f"held-out seeds A:B (default: {TEST_SEEDS[0]}:{TEST_SEEDS[1]})")
+    ev.add_argument("--laps", type=bounded_int_arg(1, 1000), default=3,
+                    help="laps each run drives, 1–1000; a run succeeds when it drives them "
+                         "without leaving the road (default: %(default)s)")
     ev.add_argument("--speeds", type=_speeds_arg, default=(1.5,),
                     help=f"comma-separated cruise speeds [m/s], each in "
-                         f"[{MIN_CRUISE_SPEED_M_S:g}, {TOP_SPEED_M_S:g}]")
+                         f"[{MIN_CRUISE_SPEED_M_S:g}, {TOP_SPEED_M_S:g}] (default: 1.5)")
     add_sweep_options(ev, "runs")
     add_camera_option(ev)
-    ev.add_argument("--out", type=Path, help="also write the JSON here")
+    ev.add_argument("--out", type=Path, help="also write the JSON to this file (default: "
+                                             "none)")
     add_force_option(ev, "an existing --out")
     add_json_option(ev)
     ev.set_defaults(func=cmd_evaluate_agent)

@@ -10,6 +10,19 @@ import pytest
 from tests.cli_helpers import tfalda
 
 
+def help_entry(help_text: str, option: str) -> str:
+    """The text argparse's help gives ``option`` (e.g. "--laps LAPS"), its lines joined."""
+    lines = help_text[help_text.index("\noptions:"):].splitlines()
+    start = next(k for k, line in enumerate(lines) if line.strip().startswith(option + " ")
+                 or line.strip() == option)
+    entry = [lines[start].strip()[len(option):]]
+    for line in lines[start + 1:]:
+        if line.startswith("  -"):  # the next option
+            break
+        entry.append(line.strip())
+    return " ".join(" ".join(entry).split())
+
+
 @pytest.mark.parametrize("argv, message", [
     (["evaluate-agent", "--seeds", "0:1", "--speeds", "1.5,1.5"],
      "argument --speeds: 1.5 m/s is named twice: '1.5,1.5'"),
@@ -55,7 +68,45 @@ def test_a_speed_out_of_range_is_refused_with_the_range_the_help_gives(
     error = tfalda(*argv, cwd=tmp_path, code=2).err.strip().splitlines()[-1]
     assert f"argument {option}: expected a number in {span} m/s" in error, error
     assert error.count(option) == 1, error
-    help_text = " ".join(tfalda(argv[0], "--help", cwd=tmp_path).out.split())
-    options = help_text[help_text.index("options:"):]
-    entry = options[options.index(f"{option} {option.strip('-').upper()}"):]
-    assert entry.split(" --")[0].count(span) == 1, entry[:200]
+    entry = help_entry(tfalda(argv[0], "--help", cwd=tmp_path).out,
+                       f"{option} {option.strip('-').upper()}")
+    assert entry.count(span) == 1, entry
+
+
+AGENT_COMMANDS = ("drive", "train", "stress", "evaluate-agent")
+
+
+@pytest.mark.parametrize("command", AGENT_COMMANDS)
+def test_every_option_has_help_with_its_default(command: str) -> None:
+    """--agent, --laps, train --seed, … had no help text, and some defaults were not
+    shown: every option says what it does, and one with a default names it."""
+    import argparse
+
+    from tests.cli_helpers import leaf_commands
+
+    parser = leaf_commands()[(command,)]
+    for action in parser._actions:
+        if isinstance(action, argparse._HelpAction):
+            continue
+        name = action.option_strings[-1]
+        assert action.help and action.help != argparse.SUPPRESS, f"{command} {name}: no help"
+        if action.default not in (None, False):
+            assert "default" in action.help, f"{command} {name}: default not shown"
+
+
+@pytest.mark.parametrize("command, option, shown", [
+    ("drive", "--agent {pid,ppo}", "(default: pid)"),
+    ("drive", "--laps LAPS", "(default: 2)"),
+    ("drive", "--speed SPEED", "(default: 1.5)"),
+    ("evaluate-agent", "--agent {pid,ppo}", "(default: pid)"),
+    ("evaluate-agent", "--laps LAPS", "(default: 3)"),
+    ("evaluate-agent", "--speeds SPEEDS", "(default: 1.5)"),
+    ("train", "--seed SEED", "(default: 0)"),
+    ("train", "--timesteps TIMESTEPS", "(default: 1000000)"),
+    ("stress", "--seeds SEEDS", "(default: 10000:10010)"),
+    ("stress", "--out OUT", "(default: out/stress)"),
+])
+def test_the_help_shows_the_defaults(command: str, option: str, shown: str,
+                                     tmp_path: Path) -> None:
+    entry = help_entry(tfalda(command, "--help", cwd=tmp_path).out, option)
+    assert shown in entry, entry
