@@ -205,7 +205,7 @@ def _train_parser(sub: Any) -> None:
                     help="seed of the network's initialisation, the exploration and the "
                          "training tracks' order (default: %(default)s)")
     tr.add_argument("--speed", type=speed_arg, default=1.5, help=SPEED_HELP)
-    tr.add_argument("--out", type=Path,
+    tr.add_argument("--out", type=Path, metavar="DIR",
                     help="folder for the run (default: runs/ppo with sb3, runs/rllib with "
                          "rllib)")
     tr.add_argument("--force", action="store_true",
@@ -337,7 +337,7 @@ def _stress_parser(sub: Any) -> None:
     st.add_argument("--faults", type=_faults_arg, default=",".join(FAULTS),
                     help=f"comma-separated subset of: {', '.join(FAULTS)} (default: all)")
     add_sweep_options(st, "runs")
-    st.add_argument("--out", type=Path, default=Path("out/stress"),
+    st.add_argument("--out", type=Path, default=Path("out/stress"), metavar="DIR",
                     help="folder for stress.jsonl, stress.json, stress.md and stress.png "
                          "(default: %(default)s)")
     add_camera_option(st)
@@ -446,8 +446,8 @@ def _evaluate_agent_parser(sub: Any) -> None:
                          f"[{MIN_CRUISE_SPEED_M_S:g}, {TOP_SPEED_M_S:g}] (default: 1.5)")
     add_sweep_options(ev, "runs")
     add_camera_option(ev)
-    ev.add_argument("--out", type=Path, help="also write the JSON to this file (default: "
-                                             "none)")
+    ev.add_argument("--out", type=Path, metavar="F.json",
+                    help="also write the JSON to this file (default: none)")
     add_force_option(ev, "an existing --out")
     add_json_option(ev)
     ev.set_defaults(func=cmd_evaluate_agent)

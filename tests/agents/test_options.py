@@ -104,9 +104,22 @@ def test_every_option_has_help_with_its_default(command: str) -> None:
     ("train", "--seed SEED", "(default: 0)"),
     ("train", "--timesteps TIMESTEPS", "(default: 1000000)"),
     ("stress", "--seeds SEEDS", "(default: 10000:10010)"),
-    ("stress", "--out OUT", "(default: out/stress)"),
+    ("stress", "--out DIR", "(default: out/stress)"),
 ])
 def test_the_help_shows_the_defaults(command: str, option: str, shown: str,
                                      tmp_path: Path) -> None:
     entry = help_entry(tfalda(command, "--help", cwd=tmp_path).out, option)
     assert shown in entry, entry
+
+
+@pytest.mark.parametrize("command, option, words", [
+    ("train", "--out DIR", "folder for the run"),
+    ("stress", "--out DIR", "folder for stress.jsonl"),
+    ("evaluate-agent", "--out F.json", "file"),
+])
+def test_the_help_says_whether_out_is_a_folder_or_a_file(command: str, option: str,
+                                                         words: str, tmp_path: Path) -> None:
+    """--out is a folder for train and stress and a file for evaluate-agent: the help's
+    placeholder and text say which."""
+    entry = help_entry(tfalda(command, "--help", cwd=tmp_path).out, option)
+    assert words in entry, entry
