@@ -9,7 +9,7 @@ if __name__ != "tfalda_sim.tracks":  # pragma: no cover - a set-up error, checke
 
 
 from .fileformat import TrackFileError, load_track, save_track
-from .generator import GeneratorParams, generate
+from .generator import GeneratorParams, generate, seed_name
 from .model import (
     Arc,
     Gap,
@@ -31,5 +31,5 @@ __all__ = [
     "NAMED_TRACKS", "VIRTUAL", "Arc", "Gap", "GeneratorParams", "Intersection", "Lane", "Line",
     "Location", "Marking", "MarkingMap", "Obstacle", "Pose", "Straight", "Track",
     "TrackFileError", "Violation", "generate", "load_named", "load_track", "printable",
-    "rasterize", "save_track", "validate",
+    "rasterize", "save_track", "seed_name", "validate",
 ]

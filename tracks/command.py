@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from pathlib import Path
 from typing import Any
@@ -14,16 +13,21 @@ from ..cli_common import (
     add_json_option,
     bounded_float_arg,
     check_outputs,
+    json_text,
     seed_arg,
 )
 from ..outputs import Outputs
 from .dimensions import MAT_EDGE_MARGIN_M
 from .fileformat import TrackFileError, load_track, save_track
-from .generator import GeneratorParams, generate
+from .generator import GeneratorParams, generate, seed_name
 from .model import Track, printable
 from .named import NAMED_TRACKS, named_path
 from .preview import write_preview
 from .rules import Violation, validate
+
+TRACK_ARG_HELP = ("named track (" + ", ".join(NAMED_TRACKS) + "), seed (generated track) or "
+                  "track file (.json)")
+"""The help of every track argument (``--track``, ``track validate``'s): one meaning."""
 
 
 def register(sub: Any) -> None:
@@ -42,8 +46,8 @@ def register(sub: Any) -> None:
     add_json_option(gen)
     gen.set_defaults(func=cmd_track_generate)
 
-    val = track_sub.add_parser("validate", help="check a track file against the rules")
-    val.add_argument("file", help="track file (JSON) or a named track: " + ", ".join(NAMED_TRACKS))
+    val = track_sub.add_parser("validate", help="check a track against the rules")
+    val.add_argument("track", help=TRACK_ARG_HELP)
     add_json_option(val)
     val.set_defaults(func=cmd_track_validate)
 
@@ -108,20 +112,12 @@ def cmd_track_generate(args: argparse.Namespace) -> int:
     return 0 if summary["valid"] else 1
 
 
-def _resolve_track_file(name_or_path: str) -> Path:
-    if name_or_path in NAMED_TRACKS:
-        return named_path(name_or_path)
-    return Path(name_or_path)
-
-
 def cmd_track_validate(args: argparse.Namespace) -> int:
-    path = _resolve_track_file(args.file)
-    try:
-        track = load_track(path, check_rules=False)
-    except TrackFileError as exc:
-        raise CliError(str(exc)) from None
+    track = resolve_track_arg(args.track, check_rules=False, option="track")
     summary = track_summary(track, validate(track))
-    summary["file"] = str(path)
+    path = (named_path(args.track) if args.track in NAMED_TRACKS
+            else track_file_arg(args.track))
+    summary["file"] = None if path is None else str(path)
     _emit(summary, args.json)
     return 0 if summary["valid"] else 1
 
@@ -133,7 +129,7 @@ def cmd_track_list(args: argparse.Namespace) -> int:
         rows.append({"name": name, "length_m": track.length_m, "closed": track.closed,
                      "description": track.description})
     if args.json:
-        print(json.dumps({"tracks": rows}))
+        print(json_text({"tracks": rows}))
     else:
         for row in rows:
             print(f"{printable(row['name']):14} {row['length_m']:7.2f} m  "
@@ -143,7 +139,7 @@ def cmd_track_list(args: argparse.Namespace) -> int:
 
 def _emit(summary: dict[str, Any], as_json: bool) -> None:
     if as_json:
-        print(json.dumps(summary))
+        print(json_text(summary))
     else:
         _print_summary(summary)
 
@@ -153,31 +149,39 @@ def _is_seed(text: str) -> bool:
 
 
 def track_file_arg(text: str) -> Path | None:
-    """The track file a ``--track`` names (``resolve_track_arg`` reads it), else None (a
-    name, a seed or no track): an input that no output may overwrite."""
+    """The track file a track argument names (``resolve_track_arg`` reads it), else None
+    (a name or a seed): an input that no output may overwrite."""
     if text in NAMED_TRACKS or _is_seed(text):
         return None
-    path = Path(text)
-    return path if path.suffix.lower() == ".json" else None
+    return Path(text)
 
 
 def track_arg_label(text: str) -> str:
-    """How reports name the track of a ``--track``: its name, "seed N" or the file's name."""
-    path = track_file_arg(text)
-    return f"seed {text}" if _is_seed(text) else path.name if path is not None else text
+    """How every output names the track of a track argument: a named track's name, a
+    seed's ``seed-N`` (its generated track's name) or the file's name — escaped, as any
+    name printed (``printable``)."""
+    if text in NAMED_TRACKS:
+        return text
+    if _is_seed(text):
+        return seed_name(int(text))
+    return printable(Path(text).name)
 
 
-def resolve_track_arg(text: str) -> Track:
-    """A named track, a seed (generated track) or a track file."""
+def resolve_track_arg(text: str, *, check_rules: bool = True, option: str = "--track") -> Track:
+    """The track of a track argument (``option``, for the error): a named track, a seed (its
+    generated track) or a track file; a file is one if it exists or ends in ``.json``
+    (a name mistyped is then not reported as a missing file). ``check_rules`` False: a
+    file breaking a rule is read as it is (``track validate`` lists the violations)."""
     if text in NAMED_TRACKS:
         return load_track(named_path(text))
     if _is_seed(text):
         return generate(int(text))
-    path = track_file_arg(text)
-    if path is not None:
+    path = Path(text)
+    if path.suffix.lower() == ".json" or path.exists():
         try:
-            return load_track(path)
+            return load_track(path, check_rules=check_rules)
         except TrackFileError as exc:
             raise CliError(str(exc)) from None
-    raise CliError(f"--track {text!r} is neither a named track ({', '.join(NAMED_TRACKS)}), "
-                   "a seed (a non-negative integer) nor a .json track file")
+    raise CliError(f"{option} {printable(text)[:80]!r} is neither a named track "
+                   f"({', '.join(NAMED_TRACKS)}), a seed (a non-negative integer) nor a track "
+                   "file (.json)")

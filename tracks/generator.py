@@ -27,6 +27,12 @@ MAX_TURN_RAD = math.radians(150.0)
 """Sharpest corner of a control polygon [rad]; sharper corners need very long tangents."""
 
 
+
+def seed_name(seed: int) -> str:
+    """The name of seed ``seed``'s generated track, and how every output labels a track
+    given as a seed: ``seed-7``."""
+    return f"seed-{int(seed)}"
+
 @dataclass(frozen=True)
 class GeneratorParams:
     """Every range the generator draws from, in one place.
@@ -238,7 +244,7 @@ def _assemble(poly: _Polygon, fil: tuple[list[Straight | Arc], list[int], np.nda
     track = Track(tuple(chain), closed=True,
                   start=Pose(float(start_xy[0]), float(start_xy[1]),
                              math.atan2(direction[1], direction[0])),
-                  lane_width_m=p.lane_width_m, start_line_s_m=0.0, name=f"seed-{seed}",
+                  lane_width_m=p.lane_width_m, start_line_s_m=0.0, name=seed_name(seed),
                   seed=seed)
     if poly.crossing is None:
         return track

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -19,18 +18,17 @@ from ..cli_common import (
     add_json_option,
     check_outputs,
     finite_float_arg,
+    json_text,
     seed_arg,
 )
 from ..outputs import Outputs
-from ..tracks import printable
-from ..tracks.command import resolve_track_arg, track_file_arg
+from ..tracks.command import TRACK_ARG_HELP, resolve_track_arg, track_arg_label, track_file_arg
 
 
 def register(sub: Any) -> None:
     """Add ``render`` to the ``tfalda-sim`` subparsers."""
     ren = sub.add_parser("render", help="render one camera frame of a track")
-    ren.add_argument("--track", required=True,
-                     help="named track, seed (generated track) or track file (.json)")
+    ren.add_argument("--track", required=True, help=TRACK_ARG_HELP)
     ren.add_argument("--s", type=finite_float_arg, required=True,
                      help="arc length of the car [m]: 0 to the track's length (a closed track "
                           "wraps: -length to length)")
@@ -96,7 +94,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     frame = renderer.render(scene, pose, frame_seed=args.seed)
     render_ms = 1000.0 * (time.perf_counter() - t0)
     summary: dict[str, Any] = {
-        "track": track.name, "s_m": args.s, "lateral_m": args.lateral,
+        "track": track_arg_label(args.track), "s_m": args.s, "lateral_m": args.lateral,
         "heading_rad": args.heading, "pose": list(pose), "camera": args.camera,
         "image_size_px": [camera.width, camera.height], "effects": asdict(effects),
         "render_ms": render_ms, "out": str(args.out),
@@ -114,9 +112,9 @@ def cmd_render(args: argparse.Namespace) -> int:
             summary["truth"] = str(args.truth)
         outs.commit()
     if args.json:
-        print(json.dumps(summary))
+        print(json_text(summary))
     else:
-        print(f"rendered {printable(track.name)} at s = {args.s:.2f} m, lateral "
+        print(f"rendered {summary['track']} at s = {args.s:.2f} m, lateral "
               f"{args.lateral:+.2f} m, heading {args.heading:+.3f} rad in {render_ms:.2f} ms")
         for key in ("out", "truth"):
             if key in summary:
