@@ -23,6 +23,7 @@ from ..cli_common import (
     bounded_float_arg,
     bounded_int_arg,
     check_outputs,
+    json_text,
     seed_range_arg,
     speed_arg_for,
 )
@@ -241,7 +242,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         with holding_stops():
             outs.commit()
     if args.json:
-        print(json.dumps(out))
+        print(json_text(out))
     else:
         _print_table(out)
     what = (f"kept the {out['tracks_done']} of {len(args.seeds)} tracks that had finished"
@@ -281,7 +282,7 @@ def _evaluate_frames(args: argparse.Namespace) -> int:
            "repeat": args.repeat or 1, "stills": args.stills, "epsilon_px": args.epsilon_px,
            "detectors": {r.label: r.summary() | {"per_frame": r.per_frame} for r in results}}
     if args.json:
-        print(json.dumps(out))
+        print(json_text(out))
         return 0
     print(f"{len(pairs)} labelled {'stills' if args.stills else 'frames'} in {args.frames}, "
           f"camera {args.camera}, each frame {args.repeat or 1}× (on a marking: ≥ 80 % of a "
@@ -609,7 +610,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
                 result["results"] = str(args.results)
             outs.commit()
     if args.json:
-        print(json.dumps(result))
+        print(json_text(result))
     else:
         print(table, end="")
         written = [*(result["out"].values() if args.out is not None else ()),
