@@ -102,9 +102,14 @@ def _check_frame(path: Path, doc: dict[str, Any], frame: str | Path | None) -> N
 
 def labelled_frame(path: str | Path, frame: str | Path) -> None:
     """Refuse (``LabelsError``) a labels file whose ``frame`` names another image than
-    ``frame``, without drawing its markings."""
+    ``frame``, without drawing its markings. A file that cannot be read passes: loading it
+    with its frame (``load_labels``) says what is wrong, after the frame's own checks."""
     p = Path(path)
-    _check_frame(p, _read(p), frame)
+    try:
+        doc = _read(p)
+    except LabelsError:
+        return
+    _check_frame(p, doc, frame)
 
 
 def load_labels(path: str | Path, width: int | None = None, height: int | None = None,
