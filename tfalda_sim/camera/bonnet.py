@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .limits import MIN_BONNET_TOP_SHARE, check_range
+
 BONNET_TOP_ROW_PX: float = 440.0
 """Row of the thesis camera's bonnet edge in the image middle [px]: below table 2.4's
 lowest ROI row (425) and fig. 2.2's bottom line (row 480 − 10)."""
@@ -78,13 +80,24 @@ class Bonnet:
 
     def check_inside(self, width: int, height: int) -> None:
         """Refuse a polygon with a vertex outside a ``width``×``height`` image (a polygon
-        drawn for another image size), or a parabola whose edge is not in the image."""
+        drawn for another image size), a parabola whose edge is not in the image, or a body
+        that reaches above ``MIN_BONNET_TOP_SHARE`` of the image (it would hide the road)."""
+        lowest_top = MIN_BONNET_TOP_SHARE * height
+        why = (f"the car's body may cover at most the lower {1 - MIN_BONNET_TOP_SHARE:.0%} of "
+               f"the {height}-row image, or it hides the road ahead")
         if self.polygon_px is None:
             if self.enabled and not (0.0 <= self.top_row < height
                                      and -height <= self.edge_drop_px <= height):
                 raise ValueError(f"bonnet parabola top_row {self.top_row:g} px must lie in the "
                                  f"{height}-row image and edge_drop_px "
                                  f"{self.edge_drop_px:g} within ±{height} px")
+            if self.enabled:
+                check_range("bonnet parabola top_row", self.top_row, lowest_top, height - 1.0,
+                            "px", why)
+                if self.edge_drop_px < 0:  # the edge is highest at the borders
+                    check_range("bonnet parabola top_row + edge_drop_px (its edge at the "
+                                "borders)", self.top_row + self.edge_drop_px, lowest_top,
+                                height - 1.0, "px", why)
             return
         u, v = self.polygon_px[:, 0], self.polygon_px[:, 1]
         bad = (u < -0.5) | (u > width - 0.5) | (v < -0.5) | (v > height - 0.5)
@@ -92,6 +105,9 @@ class Bonnet:
             k = int(np.argmax(bad))
             raise ValueError(f"bonnet polygon vertex {k} ({u[k]:g}, {v[k]:g}) lies outside the "
                              f"{width}×{height} image: was it drawn on a frame of another size?")
+        k = int(np.argmin(v))
+        check_range(f"bonnet polygon vertex {k} row v", float(v[k]), lowest_top, height - 0.5,
+                    "px", why)
 
     def edge(self, u: np.ndarray, width: int, height: int | None = None) -> np.ndarray:
         """Row of the body's top edge [px] at columns ``u``; ``inf`` where a column shows no

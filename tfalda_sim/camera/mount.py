@@ -13,6 +13,19 @@ from functools import cached_property
 
 import numpy as np
 
+from .limits import (
+    MAX_MOUNT_ANGLE_RAD,
+    MAX_MOUNT_FORWARD_M,
+    MAX_MOUNT_HEIGHT_M,
+    MAX_MOUNT_LATERAL_M,
+    MIN_MOUNT_HEIGHT_M,
+    check_range,
+)
+
+__all__ = ["DEFAULT_HFOV_RAD", "DEFAULT_MOUNT_FORWARD_M", "DEFAULT_MOUNT_HEIGHT_M",
+           "DEFAULT_MOUNT_PITCH_RAD", "FRAME_RATE_HZ", "MAX_MOUNT_ANGLE_RAD",
+           "MAX_MOUNT_HEIGHT_M", "SENSOR_HEIGHT_PX", "SENSOR_WIDTH_PX", "CameraMount"]
+
 SENSOR_WIDTH_PX: int = 752
 """Image width [px] (thesis 1.1: 752×480 grayscale)."""
 
@@ -39,14 +52,6 @@ FRAME_RATE_HZ: float = 50.0
 
 DEFAULT_MOUNT_FORWARD_M: float = 0.20
 """Default camera position ahead of the rear axle [m] (roof of a 1:10 car)."""
-
-MAX_MOUNT_HEIGHT_M: float = 2.0
-"""Highest camera accepted [m]: ten times a 1:10 car's roof; higher is a wrong unit."""
-
-MAX_MOUNT_ANGLE_RAD: float = math.radians(80.0)
-"""Largest mount pitch, roll or yaw accepted [rad]: beyond it the camera looks at the
-ground under the car or at the sky, and the mount's angle order stops meaning much."""
-
 
 @dataclass(frozen=True)
 class CameraMount:
@@ -92,14 +97,18 @@ class CameraMount:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float, np.floating,
                                                                  np.integer)):
-                raise TypeError(f"mount {name} must be a number, got {value!r}")
+                raise TypeError(f"mount.{name} must be a number, got {value!r}")
             if not math.isfinite(value):
-                raise ValueError(f"mount {name} must be finite, got {value}")
-        if not 0.0 < self.height_m <= MAX_MOUNT_HEIGHT_M:
-            raise ValueError(f"mount height_m must be in (0, {MAX_MOUNT_HEIGHT_M}] m above the "
-                             f"ground, got {self.height_m}")
+                raise ValueError(f"mount.{name} must be finite, got {value}")
+        check_range("mount.height_m", self.height_m, MIN_MOUNT_HEIGHT_M, MAX_MOUNT_HEIGHT_M,
+                    "m", "above the ground, on a 1:10 car")
+        check_range("mount.forward_m", self.forward_m, -MAX_MOUNT_FORWARD_M,
+                    MAX_MOUNT_FORWARD_M, "m", "ahead of the rear axle, on a 1:10 car")
+        check_range("mount.lateral_m", self.lateral_m, -MAX_MOUNT_LATERAL_M,
+                    MAX_MOUNT_LATERAL_M, "m", "left of the centre line, on a 1:10 car")
         for name in ("pitch_rad", "roll_rad", "yaw_rad"):
             if abs(getattr(self, name)) >= MAX_MOUNT_ANGLE_RAD:
                 limit = math.degrees(MAX_MOUNT_ANGLE_RAD)
-                raise ValueError(f"mount {name} must lie within ±{limit:.0f}°, got "
-                                 f"{math.degrees(getattr(self, name)):.1f}°")
+                value = math.degrees(getattr(self, name))
+                raise ValueError(f"mount.{name} must lie within ±{limit:.0f}° (a camera looking "
+                                 f"ahead at the road), got {value:.1f}°")

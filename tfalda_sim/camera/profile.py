@@ -48,6 +48,7 @@ import yaml
 
 from ..fileio import atomic_write
 from .bonnet import Bonnet
+from .limits import CALIBRATION_NAMES, PROFILE_NAMES, check_intrinsics
 from .models import (
     MAX_IMAGE_SIDE_PX,
     MIN_IMAGE_SIDE_PX,
@@ -229,6 +230,17 @@ def _checked_camera(path: Path, build: Any) -> Camera:
         raise CameraFileError(f"{path}: {exc}") from None
 
 
+def _plausible(path: Path, K: np.ndarray, D: np.ndarray, width: int, height: int,
+               rate: float | None, names: Any) -> None:
+    """The ranges of ``limits``, the fields named as the file names them."""
+    if not (K[0, 0] > 0 and K[1, 1] > 0):
+        return  # the camera's own check says it in its words: positive focal lengths
+    try:
+        check_intrinsics(K, D, width, height, rate, names)
+    except ValueError as exc:
+        raise CameraFileError(f"{path}: {exc}") from None
+
+
 # --------------------------------------------------------------------------- profiles
 def _lens(path: Path, value: Any, field: str = "lens") -> LensModel:
     try:
@@ -324,6 +336,7 @@ def _profile_camera(path: Path, data: dict) -> Camera:
     rate = _number(path, "frame_rate_hz", data["frame_rate_hz"])
     if "description" in data and not isinstance(data["description"], str):
         raise CameraFileError(f"{path}: description must be text")
+    _plausible(path, K, D, width, height, rate, PROFILE_NAMES)
     return _checked_camera(path, lambda: _CLASSES[lens](K, D, width=width, height=height,
                                                         mount=mount, bonnet=bonnet,
                                                         frame_rate_hz=rate))
@@ -495,6 +508,7 @@ def _intrinsics(path: Path, lens: LensModel, K: np.ndarray, D: np.ndarray, width
     if len(D) != n:
         raise CameraFileError(f"{path}: a {lens.value} lens needs {n} distortion "
                               f"coefficients ({_DISTORTION_NAMES[lens]}), got {len(D)}")
+    _plausible(path, K, D, width, height, None, CALIBRATION_NAMES)
     # Build once to check K, D and the size with the camera's own rules.
     _checked_camera(path, lambda: _CLASSES[lens](K, D, width=width, height=height,
                                                  bonnet=Bonnet.none()))

@@ -49,7 +49,7 @@ CORRUPT = {
     "text data": ("cam.xml", HEAD + K.replace("300. 0. 376.", "a b c") + D + SIZE + TAIL,
                   r"camera_matrix.data\[0\] must be a number, got 'a'"),
     "text width": ("cam.xml", HEAD + K + D + SIZE.replace("752", "wide") + TAIL,
-                   r"image_width must be an integer in \[16, 8192\], got wide"),
+                   r"image_width must be an integer in \[64, 8192\], got wide"),
     "no width": ("cam.xml", HEAD + K + D + TAIL, "no image_width"),
 }
 

@@ -209,7 +209,7 @@ def test_camera_refuses_impossible_intrinsics() -> None:
     with pytest.raises(ValueError, match="image width must be in"):
         FisheyeCamera(K, np.zeros(4), width=0)
     with pytest.raises(ValueError, match="principal point"):
-        FisheyeCamera(K, np.zeros(4), width=64, height=48)
+        FisheyeCamera(K, np.zeros(4), width=128, height=96)
     with pytest.raises(ValueError, match="frame_rate_hz"):
         FisheyeCamera(K, np.zeros(4), frame_rate_hz=0.0)
     with pytest.raises(ValueError, match="outside the 752×480 image"):

@@ -173,7 +173,8 @@ def _profile(tmp_path: Path, **changes: object) -> Path:
     ({"camera_matrix": [[1, 0], [0, 1]]}, "camera_matrix must be a list of 3 rows"),
     ({"camera_matrix": [[-250.0, 0, 376], [0, 250, 240], [0, 0, 1]]}, "positive focal"),
     ({"image_width_px": 752.5}, "image_width_px must be an integer"),
-    ({"image_width_px": 200}, "outside the 200×480 image"),
+    ({"image_width_px": 200},
+     r"\(cx\) must be in \[-0.5, 199.5\] px \(the principal point lies in the 200×480"),
     ({"frame_rate_hz": -1.0}, "frame_rate_hz must be in"),
     ({"frame_rate_hz": ".nan"}, "frame_rate_hz must be a number"),
     ({"bonnet": {"circle": 3}}, "bonnet must be one of"),
@@ -232,7 +233,7 @@ def test_missing_file_unknown_name_and_folder(tmp_path: Path) -> None:
     (b"%YAML:1.0\n---\nimage_width: .Nan\nimage_height: 480\ncamera_matrix: !!opencv-matrix\n"
      b"   rows: 3\n   cols: 3\n   dt: d\n   data: [1., 0., 2., 0., 1., 2., 0., 0., 1.]\n"
      b"distortion_coefficients: !!opencv-matrix\n   rows: 1\n   cols: 4\n   dt: d\n"
-     b"   data: [0., 0., 0., 0.]\n", r"image_width must be an integer in \[16, 8192\], got nan"),
+     b"   data: [0., 0., 0., 0.]\n", r"image_width must be an integer in \[64, 8192\], got nan"),
     (b"%YAML:1.0\n---\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   cols: 3\n"
      b"   data: [1., 0., 2., 0., 1., 2., 0., 0., 1.]\n", "camera_matrix.dt is missing"),
 ])
