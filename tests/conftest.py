@@ -1,9 +1,10 @@
 """Shared fixtures: generated tracks are cached for the whole test run (generation is
-deterministic)."""
+deterministic); stable-baselines3's log folders go to the run's temporary folder."""
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Iterator
 
 import pytest
 
@@ -22,3 +23,14 @@ def eight() -> Track:
         if generated(seed).intersections:
             return generated(seed)
     raise AssertionError("no figure-eight among the first 100 seeds")
+
+
+@pytest.fixture(autouse=True, scope="session")
+def sb3_log_folder(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    """SB3's logger makes a folder for a model that learns without a log folder (several
+    tests train such models): $SB3_LOGDIR, else a new tempdir/SB3-<time> each time, left
+    behind empty. Here it is one folder under pytest's temporary folders, which pytest
+    prunes (the console scripts the tests run inherit it)."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("SB3_LOGDIR", str(tmp_path_factory.mktemp("sb3-logs")))
+        yield
