@@ -18,18 +18,67 @@ SCRIPT = str(Path(sys.executable).with_name("tfalda-sim"))
 
 
 @pytest.fixture(scope="module")
-def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("wheel")
+def source_copy(tmp_path_factory: pytest.TempPathFactory) -> Path:
     # Built from a copy: setuptools leaves build/ in the source tree, and a stale
     # build/lib could smuggle removed modules into a later wheel.
     src = tmp_path_factory.mktemp("src") / "tfalda-sim"
     shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(
         ".venv", ".git", "build", "out", "runs", "__pycache__", "*.egg-info", ".hypothesis",
         ".pytest_cache", ".ruff_cache"))
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "-w",
-                    str(out), str(src)], check=True, capture_output=True)
+    return src
+
+
+@pytest.fixture(scope="module")
+def wheel_build(source_copy: Path,
+                tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """The wheel ``pip wheel .`` builds, and what the build backend printed (``-v``: pip
+    shows the backend's output, its warnings included, only when verbose)."""
+    out = tmp_path_factory.mktemp("wheel")
+    run = subprocess.run([sys.executable, "-m", "pip", "wheel", "-v", "--no-deps", "-w",
+                          str(out), str(source_copy)], capture_output=True, text=True,
+                         check=False)
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
     (whl,) = out.glob("tfalda_sim-*.whl")
-    return whl
+    return whl, run.stdout + run.stderr
+
+
+@pytest.fixture(scope="module")
+def wheel(wheel_build: tuple[Path, str]) -> Path:
+    return wheel_build[0]
+
+
+DATA = {"tracks/data": "tfalda_sim/tracks/data", "tfalda_sim/camera/profiles":
+        "tfalda_sim/camera/profiles", "agents/policies": "tfalda_sim/agents/policies"}
+"""The data folders of the source tree and where they install."""
+
+
+def test_the_build_declares_its_data_and_warns_of_nothing(wheel_build: tuple[Path, str]
+                                                          ) -> None:
+    """Data folders must be packages of the configuration with their package data: left
+    out, setuptools warns for each (≈ 40 lines apiece, on every install) and a future
+    setuptools would leave their files out."""
+    whl, log = wheel_build
+    assert "BuildBackendWarning" not in log and "absent from the" not in log, log[-4000:]
+    with zipfile.ZipFile(whl) as zf:
+        names = set(zf.namelist())
+    for folder, installed in DATA.items():
+        files = sorted(p.name for p in (ROOT / folder).iterdir()
+                       if p.is_file() and not p.name.startswith("."))
+        assert files, folder
+        assert {f"{installed}/{f}" for f in files} <= names, (folder, sorted(names))
+
+
+def test_the_editable_build_warns_of_nothing(source_copy: Path, tmp_path: Path) -> None:
+    """``pip install -e .``'s build, run by the backend itself (installing would replace
+    the environment's own editable install)."""
+    code = ("import sys; from setuptools import build_meta as b; "
+            "print(b.build_editable(sys.argv[1]))")
+    run = subprocess.run([sys.executable, "-W", "always", "-c", code, str(tmp_path)],
+                         cwd=source_copy, capture_output=True, text=True, check=False,
+                         timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    log = run.stdout + run.stderr
+    assert "BuildBackendWarning" not in log and "absent from the" not in log, log[-4000:]
 
 
 def test_the_wheel_installs_one_top_level_package(wheel: Path) -> None:
