@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -18,6 +19,7 @@ from tfalda_sim.cli_common import (
     bounded_int_arg,
     check_outputs,
     interrupted,
+    json_text,
     positive_int_arg,
     seed_arg,
     seed_range_arg,
@@ -93,6 +95,11 @@ def _drive_parser(sub: Any) -> None:
     dr.set_defaults(func=cmd_drive)
 
 
+def _figure(value: float, spec: str, unit: str = "") -> str:
+    """A figure of the table, or "n/a" where there is none (NaN: no step was driven)."""
+    return f"{value:{spec}}{unit}" if math.isfinite(value) else "n/a"
+
+
 def cmd_drive(args: argparse.Namespace) -> int:
     from tfalda_sim.envs import StartInCarton
 
@@ -131,16 +138,17 @@ def cmd_drive(args: argparse.Namespace) -> int:
     if args.camera_video:
         summary["camera_video"] = str(args.camera_video)
     if args.json:
-        print(json.dumps(summary))
+        print(json_text(summary))
     else:
         print(f"{args.agent} on {label} at {args.speed:g} m/s: {result.laps_completed}/"
               f"{args.laps} laps ({result.ended})")
         for k, t in enumerate(result.lap_times_s, start=1):
             print(f"  lap {k}: {t:.2f} s")
-        print(f"  mean |cross-track error| {result.mean_abs_cross_track_m * 100:.1f} cm, "
-              f"max {result.max_abs_cross_track_m * 100:.1f} cm")
+        mean_cm = _figure(result.mean_abs_cross_track_m * 100, ".1f", " cm")
+        max_cm = _figure(result.max_abs_cross_track_m * 100, ".1f", " cm")
+        print(f"  mean |cross-track error| {mean_cm}, max {max_cm}")
         print(f"  departures {result.departures}, LIS resets {result.roi_resets}, mean hit "
-              f"rate {result.mean_hit_rate:.3f}")
+              f"rate {_figure(result.mean_hit_rate, '.3f')}")
         for path in (args.video, args.camera_video):
             if path:
                 print(f"  wrote {path}")
@@ -252,7 +260,7 @@ def cmd_train(args: argparse.Namespace) -> int:
                        f"{max(1, mem // WORKER_MEMORY_BYTES)}")
     summary = train(args.timesteps, args.n_envs, args.seed, args.out, speed_m_s=args.speed,
                     progress=not args.json, camera=args.camera)
-    print(json.dumps(summary) if args.json else
+    print(json_text(summary) if args.json else
           f"trained {summary['timesteps_done']} steps in {summary['train_time_s']:.0f} s "
           f"({summary['steps_per_s'] or 0:.0f} steps/s) → {args.out / 'policy.zip'}")
     if summary["interrupted"]:
@@ -296,7 +304,7 @@ def _cmd_train_rllib(args: argparse.Namespace) -> int:
     except rllib.RllibUnavailable as exc:
         raise CliError(str(exc)) from None
     checkpoint = out / "checkpoint"
-    print(json.dumps(summary) if args.json else
+    print(json_text(summary) if args.json else
           f"trained {summary['timesteps_done']} steps in {summary['iterations_done']} "
           f"iterations, {summary['train_time_s']:.0f} s → {checkpoint}")
     kept = (f"kept the checkpoint of iteration {summary['iterations_done']} of "
@@ -407,7 +415,7 @@ def cmd_stress(args: argparse.Namespace) -> int:
             outs.commit()
     written = ", ".join(REPORT_FILES.values())
     if args.json:
-        print(json.dumps({"summary": rows, "runs": tally.runs, "jobs": jobs,
+        print(json_text({"summary": rows, "runs": tally.runs, "jobs": jobs,
                           "interrupted": end.early, "out": str(args.out)}))
     else:
         print(markdown_table(rows))
@@ -501,10 +509,10 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
             result = result_document(args.agent, policy, args.camera, args.laps, args.seeds,
                                      args.speeds, runs, end.interrupted, end.worker_died)
             if args.out:
-                outs.path(args.out).write_text(json.dumps(result, indent=1), encoding="utf-8")
+                outs.path(args.out).write_text(json_text(result, indent=1), encoding="utf-8")
             outs.commit()
     if args.json:
-        print(json.dumps(result))
+        print(json_text(result))
     else:
         print(f"{args.agent}: {args.laps} laps on seeds {args.seeds.start}:{args.seeds.stop}")
         print(f"{'speed':>8}{'success':>10}{'mean |e|':>10}{'resets/track':>14}")

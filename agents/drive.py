@@ -112,7 +112,8 @@ def make_agent(kind: str, policy: str | Path | None = None, camera: Camera | Non
 
 @dataclass
 class DriveResult:
-    """The figures of one drive (units in the names)."""
+    """The figures of one drive (units in the names); the per-step figures are NaN when
+    no step was driven (``summary``'s JSON output gives null)."""
 
     track: str
     laps_completed: int
@@ -231,8 +232,9 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
     return DriveResult(
         track=label or track.name or "", laps_completed=len(lap_times), lap_times_s=lap_times,
         departures=departures, roi_resets=resets,
-        mean_abs_cross_track_m=abs_error_sum / steps if steps else 0.0,
-        max_abs_cross_track_m=max_abs_error,
+        # No step driven (a Ctrl-C before the first): no figure, not a perfect 0.
+        mean_abs_cross_track_m=abs_error_sum / steps if steps else math.nan,
+        max_abs_cross_track_m=max_abs_error if steps else math.nan,
         mean_hit_rate=hit_sum / steps if steps else math.nan,
         distance_m=distance + info["distance_m"], steps=steps,
         wall_time_s=time.perf_counter() - t0, ended=ended)
