@@ -61,7 +61,7 @@ def test_drive_takes_a_track_file_as_the_track_it_holds(tmp_path: Path,
                                  *obstacles)
             assert code == 0, err
             doc = json.loads(out)
-            assert doc["track"] == ("seed 6" if track == "6" else "six.json")
+            assert doc["track"] == ("seed-6" if track == "6" else "six.json")
             assert doc["laps_completed"] == 1 and doc["departures"] == (1 if obstacles else 0)
             figures[track, bool(obstacles)] = {k: doc[k] for k in (
                 "lap_times_s", "steps", "departures", "roi_resets", "mean_abs_cross_track_m")}
