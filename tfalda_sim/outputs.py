@@ -23,14 +23,21 @@ Every ``tfalda-sim`` command that writes files follows the same rules:
 from __future__ import annotations
 
 import os
-import secrets
 import tempfile
 from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-from tfalda_sim.fileio import publish
+from tfalda_sim.fileio import (
+    WriteError,
+    is_write_failure,
+    publish,
+    remove_stale_temps,
+    stage,
+    temp_path,
+    unstage,
+)
 
 DIRECTORY = "/"
 """The ``suffix`` of an output that is a folder (``stress --out DIR``)."""
@@ -179,6 +186,7 @@ class Outputs:
         self._staged: dict[Path, Path] = {}
         self._kept: set[Path] = set()
         self._made_dirs: list[Path] = []
+        self._swept: set[Path] = set()
         self.written: list[Path] = []
 
     def _makedirs(self, folder: Path) -> None:
@@ -191,15 +199,21 @@ class Outputs:
             d.mkdir()
             self._made_dirs.append(d)
 
+    def _stage(self, target: Path, tmp: Path) -> None:
+        if target.parent not in self._swept:
+            self._swept.add(target.parent)
+            remove_stale_temps(target.parent)
+        self._staged[target] = tmp
+        stage(tmp, target)
+
     def path(self, target: str | os.PathLike[str]) -> Path:
         """The temporary path ``target`` is to be written to (one per target)."""
         target = Path(target)
         if target in self._staged:
             return self._staged[target]
         self._makedirs(target.parent)
-        # Short: a long target name must not become an over-long temporary one.
-        tmp = target.parent / f".tfalda-sim-{secrets.token_hex(4)}.tmp{target.suffix}"
-        self._staged[target] = tmp
+        tmp = temp_path(target.parent, target.suffix)
+        self._stage(target, tmp)
         return tmp
 
     def journal(self, target: str | os.PathLike[str], *, keep_on_abort: bool = False) -> Path:
@@ -209,7 +223,7 @@ class Outputs:
         target = Path(target)
         self._makedirs(target.parent)
         tmp = journal_of(target)
-        self._staged[target] = tmp
+        self._stage(target, tmp)
         if keep_on_abort:
             self._kept.add(tmp)
         return tmp
@@ -225,20 +239,28 @@ class Outputs:
                                   "nothing was written")
         for target, tmp in self._staged.items():
             if tmp.exists():
-                publish(tmp, target)
+                try:
+                    publish(tmp, target)
+                except OSError as exc:
+                    raise WriteError.of(target, exc) from None
                 self.written.append(target)
-        self._staged.clear()
+        self._forget()
         self._kept.clear()
         self._made_dirs.clear()
         return list(self.written)
+
+    def _forget(self) -> None:
+        for tmp in self._staged.values():
+            unstage(tmp)
+        self._staged.clear()
+        self._kept.clear()
 
     def abort(self) -> None:
         """Remove the temporary files and the folders this command created."""
         for tmp in self._staged.values():
             if tmp not in self._kept:
                 tmp.unlink(missing_ok=True)
-        self._staged.clear()
-        self._kept.clear()
+        self._forget()
         for d in reversed(self._made_dirs):
             try:
                 d.rmdir()
@@ -249,10 +271,36 @@ class Outputs:
     def __enter__(self) -> Outputs:
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, *_: object) -> None:
+    def failed_target(self, exc: BaseException) -> Path | None:
+        """The target whose write ``exc`` is, if it is a write that failed for want of space
+        (or a size limit, a bad disk): the one whose temporary file it names, or, for an
+        error that names no file (a full disk shows in ``write()``), the target written
+        last."""
+        staged = {tmp: target for target, tmp in self._staged.items()}
+        if not is_write_failure(exc, *staged):
+            return None
+        name = getattr(exc, "filename", None)
+        if name is not None:
+            return staged[Path(os.fsdecode(name))]
+        written = []
+        for k, (tmp, target) in enumerate(staged.items()):
+            try:
+                written.append((tmp.stat().st_mtime_ns, k, target))
+            except OSError:
+                continue
+        if written:
+            return max(written)[2]
+        return next(reversed(staged.values()), None)
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 *_: object) -> None:
+        failed = self.failed_target(exc) if exc is not None else None
         if exc_type is not None or self._staged:
             # Anything not committed explicitly is not kept.
             self.abort()
+        if failed is not None:
+            assert isinstance(exc, OSError)
+            raise WriteError.of(failed, exc) from None
 
 
 @contextmanager

@@ -16,6 +16,7 @@ from ..cli_common import (
     check_outputs,
     positive_int_arg,
 )
+from ..fileio import WriteError
 from ..perception.command import check_camera_geometry
 from ..video import VideoError
 from .loop import Detector, HoughPreset, replay
@@ -68,10 +69,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
                         hough=HoughPreset(args.hough_preset), stages=args.stages,
                         progress=sys.stderr.isatty() or not args.json, camera=camera)
         result["camera"] = args.camera
-    except (FileNotFoundError, VideoError) as exc:
+    except (FileNotFoundError, VideoError, WriteError) as exc:
         raise CliError(str(exc)) from None
     except OSError as exc:
-        raise CliError(f"cannot write {args.out}: {exc}") from None
+        raise CliError(f"cannot write {args.out}: {exc.strerror or exc}") from None
     # An interrupted --loops N did not finish what was asked; --forever ends that way.
     code = 130 if result["stopped"] == "interrupted" and not args.forever else 0
     if args.json:
