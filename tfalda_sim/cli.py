@@ -10,13 +10,15 @@ invalid track, laps not completed), 2 bad input, 130 stopped by Ctrl-C.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import errno
 import importlib
 import io
 import os
 import signal
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from pathlib import Path
 
 from .cli_common import EXIT_BAD_INPUT, EXIT_NEGATIVE, EXIT_OK, CliError, interrupted
 from .interrupts import held_stop, is_interrupt, stop_signals_interrupt
@@ -28,6 +30,76 @@ COMMAND_MODULES: tuple[str, ...] = ("tracks.command", "camera.command", "renderi
 """The domains' command modules (under ``tfalda_sim``), in the order ``--help`` lists them;
 imported by ``build_parser``, inside ``main``'s error handling (numba, OpenCV and the
 rest take most of a second to import: a Ctrl-C then must not print a traceback)."""
+
+
+RENDERING_COMMANDS: frozenset[str] = frozenset(
+    {"render", "evaluate", "compare", "drive", "train", "stress", "evaluate-agent"})
+"""The commands that render camera frames: each compiles the renderer's numba kernels,
+most of the ≈ 1 min a cold kernel cache costs (a fresh install: ``make install`` empties
+it)."""
+
+HEAVY_KERNEL_PACKAGES: tuple[str, ...] = ("tfalda_sim.rendering", "tfalda_sim.perception")
+"""Whose kernels take most of a cold cache's minute to compile."""
+
+COMPILING_NOTE = ("compiling the simulator's kernels once (≈ 1 min; later runs load them "
+                  "from numba's cache) …")
+
+
+def _renderer_cache_is_cold() -> bool:
+    """True if numba's on-disk cache holds none of the renderer's kernels (in the folder
+    numba itself would use: NUMBA_CACHE_DIR's, the package's __pycache__ or the user's
+    cache); False when unsure (numba's locators are not a public API)."""
+    try:
+        import importlib.util
+
+        from numba.core.caching import CacheImpl
+
+        spec = importlib.util.find_spec("tfalda_sim.rendering.renderer")
+        if spec is None or spec.origin is None:
+            return False
+        for cls in CacheImpl._locator_classes:
+            locator = cls.from_function(_renderer_cache_is_cold, spec.origin)
+            if locator is not None:
+                return not any(Path(locator.get_cache_path()).glob("renderer.*.nbi"))
+    except Exception:
+        return False
+    return False
+
+
+@contextlib.contextmanager
+def _note_first_compile(command: str) -> Iterator[None]:
+    """One line on stderr when a rendering command starts compiling on a cold cache: without
+    it the first run is silent for a minute. Said at the first compile, not before the
+    command (a bad argument then fails at once, without it), and once: the sweep workers
+    forked from here inherit the listener and share the one lock."""
+    if command not in RENDERING_COMMANDS or not _renderer_cache_is_cold():
+        yield
+        return
+    import multiprocessing
+
+    from numba.core import event
+    from tqdm import tqdm
+
+    once = multiprocessing.Lock()
+
+    class Note(event.Listener):
+        def on_start(self, ev: event.Event) -> None:
+            # The renderer's and the detector's kernels: the minute. A track's few
+            # kernels take seconds (and compile before a bad --s is refused).
+            data = ev.data if isinstance(ev.data, dict) else {}
+            func = getattr(data.get("dispatcher"), "py_func", None)
+            if (getattr(func, "__module__", "").startswith(HEAVY_KERNEL_PACKAGES)
+                    and once.acquire(block=False)):  # never released: said once
+                try:  # above a progress bar of this process, which is drawn again below
+                    tqdm.write(COMPILING_NOTE, file=sys.stderr)
+                except OSError:
+                    _silence_std_streams()
+
+        def on_end(self, ev: event.Event) -> None:
+            pass
+
+    with event.install_listener("numba:compile", Note()):
+        yield
 
 
 def _version() -> str:
@@ -133,7 +205,8 @@ def _run(argv: Sequence[str] | None) -> int:
             args = parser.parse_args(argv)
         except SystemExit as exc:  # argparse has printed the usage and the error
             return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
-        code = int(args.func(args))
+        with _note_first_compile(args.command):
+            code = int(args.func(args))
         sys.stdout.flush()  # a closed pipe shows here, inside the handling below
         if held_stop() is not None and code in (EXIT_OK, EXIT_NEGATIVE):
             # A first Ctrl-C that came while the finished command saved its results
