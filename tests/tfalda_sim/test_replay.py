@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 import pytest
 
+from tests.cli_helpers import tfalda
 from tfalda_sim import replay as replay_module
 from tfalda_sim.cli import main
 from tfalda_sim.perception import HoughDetector
@@ -266,3 +267,36 @@ def test_loops_equal_to_the_default_still_excludes_forever(video: Path, capsys) 
     """Found by the fuzz: argparse let `--loops=1 --forever` through (1 is the default)."""
     assert main(["replay", str(video), "--detector", "hough", "--loops=1", "--forever"]) == 2
     assert "not allowed with argument" in capsys.readouterr().err
+
+
+def test_max_frames_bounds_forever_and_its_video(video: Path, tmp_path: Path) -> None:
+    """--forever --out grew without bound on disk: --max-frames stops it after N frames,
+    with the video of exactly those frames."""
+    out = tmp_path / "o.mp4"
+    run = tfalda("replay", video, "--detector", "hough", "--forever", "--max-frames", "15",
+                 "--out", out, "--json", cwd=tmp_path)
+    result = run.json()
+    assert result["frames"] == 15 and result["stopped"] == "max_frames"
+    assert result["loops_completed"] == 15 // FRAMES and result["out"] == str(out)
+    reader = VideoReader(out)
+    assert reader.info.codec == "h264" and sum(1 for _ in reader.frames()) == 15
+    assert "--max-frames" not in run.err  # bounded: no note about the growth
+    # With --loops, whichever comes first.
+    assert tfalda("replay", video, "--detector", "tfalda", "--loops", "5", "--max-frames", "7",
+                  "--json", cwd=tmp_path).json()["frames"] == 7
+    assert tfalda("replay", video, "--detector", "hough", "--loops", "1", "--max-frames", "99",
+                  "--json", cwd=tmp_path).json()["stopped"] == "loops"
+    tfalda("replay", video, "--detector", "hough", "--max-frames", "0", cwd=tmp_path, code=2)
+    help_text = " ".join(tfalda("replay", "--help", cwd=tmp_path).out.split())
+    assert "--out grows ≈ 2–3.5 kB a frame, about 1 GB an hour" in help_text
+    assert "--max-frames N stop after N frames" in help_text
+
+
+def test_forever_with_out_and_no_bound_says_how_the_video_grows(
+        video: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys) -> None:
+    _interrupt_on_call(monkeypatch, 4)
+    assert main(["replay", str(video), "--detector", "hough", "--forever", "--out",
+                 str(tmp_path / "o.mp4"), "--json"]) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["frames"] == 3
+    assert "grows ≈ 2–3.5 kB a frame" in captured.err and "--max-frames N" in captured.err

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -14,12 +13,17 @@ from ..cli_common import (
     add_force_option,
     add_json_option,
     check_outputs,
+    json_text,
     positive_int_arg,
 )
 from ..fileio import WriteError
 from ..perception.command import check_camera_geometry
 from ..video import VideoError
-from .loop import Detector, HoughPreset, replay
+from .loop import OUT_BYTES_PER_FRAME, Detector, HoughPreset, replay
+
+_GROWTH = (f"≈ {OUT_BYTES_PER_FRAME[0] / 1000:g}–{OUT_BYTES_PER_FRAME[1] / 1000:g} kB a frame, "
+           "about 1 GB an hour")
+"""How --out grows with --forever (said in --help and when it starts)."""
 
 
 def register(sub: Any) -> None:
@@ -38,7 +42,11 @@ def register(sub: Any) -> None:
     # default's very object (`--loops=1 --forever` was accepted)
     times.add_argument("--loops", type=positive_int_arg,
                        help="passes over the video (default 1)")
-    times.add_argument("--forever", action="store_true", help="loop until Ctrl-C")
+    times.add_argument("--forever", action="store_true",
+                       help=f"loop until Ctrl-C (or --max-frames); --out grows {_GROWTH}")
+    rp.add_argument("--max-frames", type=positive_int_arg, metavar="N",
+                    help="stop after N frames (with --loops: whichever comes first); "
+                         "bounds --out with --forever")
     rp.add_argument("--hough-preset", choices=[p.value for p in HoughPreset],
                     help="hough: the seed's numbers, the simulator preset (default; the "
                          "seed's 0.9 threshold finds no rendered marking) or real (a real "
@@ -63,11 +71,15 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if args.stages and (args.detector != Detector.HOUGH.value or args.out is None):
         raise CliError("--stages writes the Hough stage view: use it with --detector hough "
                        "and --out F.mp4")
+    if args.forever and args.out is not None and args.max_frames is None:
+        print(f"note: {args.out} grows {_GROWTH} until Ctrl-C; --max-frames N bounds it",
+              file=sys.stderr)
     try:
         result = replay(args.video, Detector(args.detector),
                         loops=None if args.forever else (args.loops or 1), out=args.out,
                         hough=HoughPreset(args.hough_preset), stages=args.stages,
-                        progress=sys.stderr.isatty() or not args.json, camera=camera)
+                        progress=sys.stderr.isatty() or not args.json, camera=camera,
+                        max_frames=args.max_frames)
         result["camera"] = args.camera
     except (FileNotFoundError, VideoError, WriteError) as exc:
         raise CliError(str(exc)) from None
@@ -76,7 +88,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     # An interrupted --loops N did not finish what was asked; --forever ends that way.
     code = 130 if result["stopped"] == "interrupted" and not args.forever else 0
     if args.json:
-        print(json.dumps(result))
+        print(json_text(result))
         return code
     print(f"{result['video']}: {result['frames']} frames, {result['loops_completed']} loops "
           f"({result['stopped']}), {result['frames_per_s'] or 0:.0f} frames/s, detector "

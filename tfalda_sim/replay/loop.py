@@ -2,18 +2,20 @@
 set-up: "Lesen Sie diesen als Endlosschleife ein").
 
     tfalda-sim replay VIDEO --detector hough|tfalda [--loops N | --forever]
-                            [--out annotated.mp4 [--stages]] [--json]
+                            [--max-frames N] [--out annotated.mp4 [--stages]] [--json]
 
 The video is read frame by frame (``video.VideoReader``: colour → grey, other sizes
 resized to the camera's 752×480), each frame goes through the detector, and after the last
 frame the file is read again from its start — ``--loops`` times, or until Ctrl-C with
-``--forever``. A Ctrl-C ends the replay cleanly in either mode: the frames so far are
-counted, the annotated video so far is kept, the summary printed.
+``--forever``; ``--max-frames`` stops it after that many frames in either mode (and so
+bounds the annotated video, which grows ``OUT_BYTES_PER_FRAME`` a frame). A Ctrl-C ends
+the replay cleanly in either mode: the frames so far are counted, the annotated video so
+far is kept, the summary printed.
 
 TFALDA + LIS keeps its state across the loop's seam (a recorded lap is a closed loop; the
 LIS resets if the seam does not fit); the Hough baseline has no state between frames.
-The command exits 0 after ``--loops N`` or a Ctrl-C of ``--forever``, 130 when a Ctrl-C
-cut ``--loops N`` short, 2 for an unreadable video or a bad option.
+The command exits 0 after ``--loops N``, ``--max-frames N`` or a Ctrl-C of ``--forever``,
+130 when a Ctrl-C cut ``--loops N`` short, 2 for an unreadable video or a bad option.
 """
 
 from __future__ import annotations
@@ -43,6 +45,10 @@ from ..video import VideoReader, VideoWriter
 
 DEFAULT_FPS: float = 25.0
 """Frame rate of the annotated video when the recording declares none [1/s]."""
+
+OUT_BYTES_PER_FRAME: tuple[int, int] = (2_000, 3_500)
+"""What the annotated video grows by a frame (H.264 of a 752×480 drive) [bytes]: the
+annotated frames, and the 2×2 stage view. At 100–200 frames/s that is ≈ 1 GB an hour."""
 
 
 class Detector(enum.Enum):
@@ -105,16 +111,19 @@ def _frame_step(detector: Detector, hough: HoughDetector | None,
 
 def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
            out: Path | None = None, hough: HoughPreset = HoughPreset.SIMULATOR,
-           stages: bool = False, progress: bool = False, camera: Camera | None = None
-           ) -> dict[str, Any]:
-    """Replay ``path`` ``loops`` times (``None``: until Ctrl-C) through ``detector``;
-    the summary: frames, loops, frames/s, detector ms/frame, detections, conversions, and
-    how it stopped (``"loops"`` or ``"interrupted"``). ``out`` gets the annotated frames,
+           stages: bool = False, progress: bool = False, camera: Camera | None = None,
+           max_frames: int | None = None) -> dict[str, Any]:
+    """Replay ``path`` ``loops`` times (``None``: until Ctrl-C) through ``detector``, or
+    until ``max_frames`` frames; the summary: frames, loops, frames/s, detector ms/frame,
+    detections, conversions, and how it stopped (``"loops"``, ``"max_frames"`` or
+    ``"interrupted"``). ``out`` gets the annotated frames,
     or with ``stages`` (Hough only) the seed's 2×2 stage view of each frame. ``camera``
     (default: the thesis'): frames are converted to its size and both detectors use the
     geometry derived for it."""
     if stages and detector is not Detector.HOUGH:
         raise ValueError("stages is the Hough baseline's 2×2 view; use the hough detector")
+    if max_frames is not None and max_frames < 1:
+        raise ValueError(f"max_frames must be ≥ 1 or None, got {max_frames}")
     size = (camera.width, camera.height) if camera is not None else (IMAGE_WIDTH_PX,
                                                                        IMAGE_HEIGHT_PX)
     reader = VideoReader(path, size=size)
@@ -136,8 +145,11 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
     try:
         if out is not None:
             writer = VideoWriter(out, fps)
-        bar = tqdm(total=loops * per_loop if loops and per_loop else None, unit="frame",
-                   desc=f"replay {detector.value}", disable=not progress)
+        total = loops * per_loop if loops and per_loop else None
+        if max_frames is not None:
+            total = min(total or max_frames, max_frames)
+        bar = tqdm(total=total, unit="frame", desc=f"replay {detector.value}",
+                   disable=not progress)
         for loop, frame in reader.loop(loops):
             found, reset, picture, dt = _frame_step(
                 detector, hough_det, tfalda_det, frame, writer is not None,
@@ -150,6 +162,9 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
             if writer is not None and picture is not None:
                 writer.write(picture)
             bar.update()
+            if max_frames is not None and frames >= max_frames:
+                stopped = "max_frames"
+                break
         keep = True
     except INTERRUPTS as exc:
         if not is_interrupt(exc):
