@@ -274,15 +274,15 @@ class VideoWriter:
                              f"{self.size[1]}; resize with cv2.resize first")
         if self._failed is not None:
             raise self._failed
-        if self._sink is None:
-            self._sink = self._open()
         if frame.ndim == 2:
             frame = cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
         try:
             # A frame goes whole or not at all, and is counted: a Ctrl-C in the middle of
             # one would leave a torn frame at the end of the pipe, which ffmpeg reports as
-            # an error.
+            # an error; one while ffmpeg starts would lose track of the process.
             with deferring_stops():
+                if self._sink is None:
+                    self._sink = self._open()
                 self._sink.write(np.ascontiguousarray(frame))
                 self.frames += 1
         except WriteError as exc:
