@@ -34,6 +34,7 @@ from tfalda_sim.sweep_runner import (
     sweep_backend,
     sweep_exit,
 )
+from tfalda_sim.timing import TIMINGS, Timing, load_timing, resolve_timing
 from tfalda_sim.tracks import NAMED_TRACKS
 from tfalda_sim.tracks.command import resolve_track_arg, track_arg_label, track_file_arg
 from tfalda_sim.vehicle import MIN_CRUISE_SPEED_M_S, CarParams
@@ -54,6 +55,62 @@ def add_trust_policy_option(parser: argparse.ArgumentParser) -> None:
                              "stable-baselines3 save): unpickling runs code the file's author "
                              "chose, so only for a file from a source you trust (default: "
                              "refused; files `tfalda-sim train` writes need no trust)")
+
+
+VEHICLE_CHOICES: tuple[str, ...] = ("kinematic", "dynamic")
+"""``--vehicle``: the env's ``VEHICLES`` (spelt here: importing the env would load the
+renderer and numba for every command's parser, ``--help`` included)."""
+
+
+def timing_arg(text: str) -> str:
+    """argparse type of ``--timing``: a name of ``TIMINGS`` or a .json timing file, read
+    and checked now (``load_timing``), so a bad file is refused before any work."""
+    if text in TIMINGS:
+        return text
+    if not text.endswith(".json"):
+        shown = repr(text if len(text) <= 40 else text[:37] + "...")
+        raise argparse.ArgumentTypeError(f"unknown timing {shown}; use {', '.join(TIMINGS)} "
+                                         "or a .json timing file")
+    try:
+        load_timing(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
+def add_vehicle_options(parser: argparse.ArgumentParser) -> None:
+    """``--vehicle kinematic|dynamic`` and ``--timing NAME|FILE``: the car model and the
+    pipeline's timing of every env the command makes (docs/dynamics.md)."""
+    parser.add_argument("--vehicle", choices=VEHICLE_CHOICES, default="kinematic",
+                        help="car model: the kinematic bicycle or the dynamic single-track "
+                             "car that slides beyond its tyres' grip (default: %(default)s)")
+    parser.add_argument("--timing", type=timing_arg, default="ideal", metavar="NAME|FILE",
+                        help=f"the pipeline's timing: {', '.join(TIMINGS)} (the thesis' "
+                             "car: frames two periods old, a hobby servo) or a .json timing "
+                             "file (docs/dynamics.md) (default: %(default)s)")
+
+
+def timing_input(text: str) -> Path | None:
+    """The file ``--timing`` reads (for the output check: never overwritten), or None for
+    a named timing."""
+    return None if text in TIMINGS else Path(text)
+
+
+def vehicle_config(args: argparse.Namespace) -> dict[str, str]:
+    """``--vehicle`` and ``--timing`` in a sweep's configuration (its results file's header,
+    which ``--resume`` compares): only when not the defaults, so a results file written
+    before these options existed still resumes."""
+    return ({} if args.vehicle == "kinematic" else {"vehicle": args.vehicle}) | (
+        {} if args.timing == "ideal" else {"timing": args.timing})
+
+
+def resolve_timing_arg(text: str) -> Timing:
+    """The timing of ``--timing`` (checked at the parser; read again here, so a file
+    changed since is still refused in one line)."""
+    try:
+        return resolve_timing(text)
+    except ValueError as exc:
+        raise CliError(f"--timing: {exc}") from None
 
 
 def register(sub: Any) -> None:
@@ -90,6 +147,7 @@ def _drive_parser(sub: Any) -> None:
                     help="MP4 of the bare grey camera frames, for tfalda-sim replay "
                          "(default: none)")
     add_camera_option(dr)
+    add_vehicle_options(dr)
     add_force_option(dr, "existing videos")
     add_json_option(dr)
     dr.set_defaults(func=cmd_drive)
@@ -108,8 +166,10 @@ def cmd_drive(args: argparse.Namespace) -> int:
     check_outputs({"video": args.video, "camera-video": args.camera_video},
                   {"video": ".mp4", "camera-video": ".mp4"}, args.force,
                   inputs={"policy": args.policy, "camera": camera_input(args.camera),
-                          "track": track_file_arg(args.track)})
+                          "track": track_file_arg(args.track),
+                          "timing": timing_input(args.timing)})
     camera = check_camera_geometry(args.camera)
+    timing = resolve_timing_arg(args.timing)
     track, label = resolve_track_arg(args.track), track_arg_label(args.track)
     if track.obstacles and not args.obstacles:
         track = replace(track, obstacles=())
@@ -123,7 +183,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
         result = drive(agent, track, laps=args.laps, speed_m_s=args.speed,
                        recover=not args.no_recover, video=args.video,
                        camera_video=args.camera_video, label=label,
-                       progress=not args.json, camera=camera)
+                       progress=not args.json, camera=camera, vehicle=args.vehicle,
+                       timing=timing)
     except CameraGeometryError as exc:
         raise CliError(f"--camera {args.camera}: {exc}") from None
     except PolicyFileError as exc:
@@ -132,7 +193,8 @@ def cmd_drive(args: argparse.Namespace) -> int:
         raise CliError(f"--track {args.track}: {exc}; leave out --obstacles or move the "
                        "carton") from None
     summary = result.summary() | {"agent": args.agent, "speed_m_s": args.speed,
-                                  "camera": args.camera}
+                                  "camera": args.camera, "vehicle": args.vehicle,
+                                  "timing": args.timing}
     if args.video:
         summary["video"] = str(args.video)
     if args.camera_video:
@@ -142,6 +204,7 @@ def cmd_drive(args: argparse.Namespace) -> int:
     else:
         print(f"{args.agent} on {label} at {args.speed:g} m/s: {result.laps_completed}/"
               f"{args.laps} laps ({result.ended})")
+        print(f"  {args.vehicle} car, {args.timing} timing")
         for k, t in enumerate(result.lap_times_s, start=1):
             print(f"  lap {k}: {t:.2f} s")
         mean_cm = _figure(result.mean_abs_cross_track_m * 100, ".1f", " cm")
@@ -221,6 +284,7 @@ def _train_parser(sub: Any) -> None:
                          "checkpoint/, train.json and same-named checkpoints are replaced, its "
                          "TensorBoard runs kept beside the new one")
     add_camera_option(tr)
+    add_vehicle_options(tr)
     add_json_option(tr)
     tr.set_defaults(func=cmd_train, train_parser=tr)
 
@@ -250,8 +314,10 @@ def cmd_train(args: argparse.Namespace) -> int:
     args.out = Path("runs/ppo") if args.out is None else args.out
     args.n_envs = 2 if args.n_envs is None else args.n_envs
     check_outputs({"out": args.out}, {"out": DIRECTORY}, args.force,
-                  files_in={"out": OUT_FILES}, inputs={"camera": camera_input(args.camera)})
+                  files_in={"out": OUT_FILES}, inputs={"camera": camera_input(args.camera),
+                                                       "timing": timing_input(args.timing)})
     check_camera_geometry(args.camera)
+    resolve_timing_arg(args.timing)
     mem = available_memory_bytes()
     if args.n_envs > 1 and mem is not None and args.n_envs * WORKER_MEMORY_BYTES > mem:
         raise CliError(f"--n-envs {args.n_envs} needs about "
@@ -259,7 +325,8 @@ def cmd_train(args: argparse.Namespace) -> int:
                        f"{mem / 2**30:.1f} GiB is available; use at most "
                        f"{max(1, mem // WORKER_MEMORY_BYTES)}")
     summary = train(args.timesteps, args.n_envs, args.seed, args.out, speed_m_s=args.speed,
-                    progress=not args.json, camera=args.camera)
+                    progress=not args.json, camera=args.camera, vehicle=args.vehicle,
+                    timing=args.timing)
     print(json_text(summary) if args.json else
           f"trained {summary['timesteps_done']} steps in {summary['train_time_s']:.0f} s "
           f"({summary['steps_per_s'] or 0:.0f} steps/s) → {args.out / 'policy.zip'}")
@@ -287,8 +354,10 @@ def _cmd_train_rllib(args: argparse.Namespace) -> int:
     # Both backends' files: an earlier run of either is not mixed into without --force.
     check_outputs({"out": out}, {"out": DIRECTORY}, args.force,
                   files_in={"out": tuple(dict.fromkeys((*rllib.OUT_FILES, *sb3.OUT_FILES)))},
-                  inputs={"camera": camera_input(args.camera)})
+                  inputs={"camera": camera_input(args.camera),
+                          "timing": timing_input(args.timing)})
     check_camera_geometry(args.camera)
+    resolve_timing_arg(args.timing)
     mem = available_memory_bytes()
     if args.ray_address is None and mem is not None and runners * WORKER_MEMORY_BYTES > mem:
         raise CliError(f"--env-runners {runners} needs about "
@@ -300,7 +369,8 @@ def _cmd_train_rllib(args: argparse.Namespace) -> int:
     try:
         summary = rllib.train_rllib(args.timesteps, args.seed, out, config=config,
                                     speed_m_s=args.speed, camera=args.camera,
-                                    address=args.ray_address, progress=not args.json)
+                                    address=args.ray_address, progress=not args.json,
+                                    vehicle=args.vehicle, timing=args.timing)
     except rllib.RllibUnavailable as exc:
         raise CliError(str(exc)) from None
     checkpoint = out / "checkpoint"
@@ -349,6 +419,7 @@ def _stress_parser(sub: Any) -> None:
                     help="folder for stress.jsonl, stress.json, stress.md and stress.png "
                          "(default: %(default)s)")
     add_camera_option(st)
+    add_vehicle_options(st)
     add_force_option(st, "an earlier report in --out")
     add_json_option(st)
     st.set_defaults(func=cmd_stress)
@@ -377,13 +448,17 @@ def cmd_stress(args: argparse.Namespace) -> int:
     check_outputs({"out": args.out, "results": args.results},
                   {"out": DIRECTORY, "results": ".jsonl"}, args.force or args.resume,
                   files_in={"out": REPORT_FILES.values()},
-                  inputs={"camera": camera_input(args.camera)})
+                  inputs={"camera": camera_input(args.camera),
+                          "timing": timing_input(args.timing)})
     check_camera_geometry(args.camera)
+    timing = resolve_timing_arg(args.timing)
     jobs = len(args.seeds) * len(faults) * 2
     spec = SweepSpec(command="stress",
                      config={"seeds": f"{args.seeds.start}:{args.seeds.stop}",
-                             "faults": faults, "camera": args.camera},
-                     jobs=battery_jobs(args.seeds, faults, args.camera), total=jobs,
+                             "faults": faults, "camera": args.camera,
+                             **vehicle_config(args)},
+                     jobs=battery_jobs(args.seeds, faults, args.camera, args.vehicle, timing),
+                     total=jobs,
                      fn=run_job, record=run_record, check=check_run_record)
     resume = read_results(args.results, spec) if args.resume else None
     backend = sweep_backend(args, jobs)
@@ -408,15 +483,17 @@ def cmd_stress(args: argparse.Namespace) -> int:
             return sweep_exit(end, "no run had finished; nothing written")
         with holding_stops():  # a second Ctrl-C must not lose the first one's results
             with open(files["json"], "w", encoding="utf-8") as fh:
-                json.dump(report_document(rows, tally.runs) | {"interrupted": end.early}, fh,
-                          indent=1)
+                json.dump(report_document(rows, tally.runs) | {
+                    "interrupted": end.early, "vehicle": args.vehicle,
+                    "timing": args.timing}, fh, indent=1)
             files["md"].write_text(markdown_table(rows) + "\n", encoding="utf-8")
             plot(rows, files["png"])
             outs.commit()
     written = ", ".join(REPORT_FILES.values())
     if args.json:
         print(json_text({"summary": rows, "runs": tally.runs, "jobs": jobs,
-                          "interrupted": end.early, "out": str(args.out)}))
+                          "interrupted": end.early, "out": str(args.out),
+                          "vehicle": args.vehicle, "timing": args.timing}))
     else:
         print(markdown_table(rows))
         print(f"wrote {args.out}/: {written}")
@@ -454,6 +531,7 @@ def _evaluate_agent_parser(sub: Any) -> None:
                          f"[{MIN_CRUISE_SPEED_M_S:g}, {TOP_SPEED_M_S:g}] (default: 1.5)")
     add_sweep_options(ev, "runs")
     add_camera_option(ev)
+    add_vehicle_options(ev)
     ev.add_argument("--out", type=Path, metavar="F.json",
                     help="also write the JSON to this file (default: none)")
     add_force_option(ev, "an existing --out")
@@ -478,8 +556,10 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
     # --resume replaces the report of the run it continues (and its --results file).
     check_outputs({"out": args.out, "results": args.results},
                   {"out": ".json", "results": ".jsonl"}, args.force or args.resume,
-                  inputs={"policy": args.policy, "camera": camera_input(args.camera)})
+                  inputs={"policy": args.policy, "camera": camera_input(args.camera),
+                          "timing": timing_input(args.timing)})
     camera = check_camera_geometry(args.camera)
+    timing = resolve_timing_arg(args.timing)
     try:
         check_agent(args.agent, args.policy, camera, trust_policy=args.trust_policy)
     except (ValueError, FileNotFoundError, ImportError) as exc:
@@ -490,9 +570,10 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
                      config={"agent": args.agent, "policy": policy,
                              "seeds": f"{args.seeds.start}:{args.seeds.stop}",
                              "laps": args.laps, "speeds": list(args.speeds),
-                             "camera": args.camera},
+                             "camera": args.camera, **vehicle_config(args)},
                      jobs=evaluation_jobs(args.agent, policy, args.seeds, args.laps,
-                                          args.speeds, args.camera, args.trust_policy),
+                                          args.speeds, args.camera, args.trust_policy,
+                                          args.vehicle, timing),
                      total=jobs, fn=run_job, record=run_record, check=check_run_record)
     resume = read_results(args.results, spec) if args.resume else None
     backend = sweep_backend(args, jobs)
@@ -507,14 +588,16 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
             return sweep_exit(end, "no run had finished; nothing written")
         with holding_stops():  # a second Ctrl-C must not lose the first one's results
             result = result_document(args.agent, policy, args.camera, args.laps, args.seeds,
-                                     args.speeds, runs, end.interrupted, end.worker_died)
+                                     args.speeds, runs, end.interrupted, end.worker_died,
+                                     vehicle=args.vehicle, timing=args.timing)
             if args.out:
                 outs.path(args.out).write_text(json_text(result, indent=1), encoding="utf-8")
             outs.commit()
     if args.json:
         print(json_text(result))
     else:
-        print(f"{args.agent}: {args.laps} laps on seeds {args.seeds.start}:{args.seeds.stop}")
+        print(f"{args.agent}: {args.laps} laps on seeds {args.seeds.start}:{args.seeds.stop}"
+              f" ({args.vehicle} car, {args.timing} timing)")
         print(f"{'speed':>8}{'success':>10}{'mean |e|':>10}{'resets/track':>14}")
         for r in result["speeds"]:
             print(f"{r['speed_m_s']:>6.2f} m/s{r['successes']:>5}/{r['tracks']:<4}"

@@ -20,8 +20,10 @@ import numpy as np
 from tqdm import tqdm
 
 from tfalda_sim.camera import Camera
+from tfalda_sim.dynamics import DynamicsParams
 from tfalda_sim.envs import StartInCarton, TfaldaTrackEnv
 from tfalda_sim.interrupts import INTERRUPTS, is_interrupt
+from tfalda_sim.timing import Timing
 from tfalda_sim.tracks import Track
 from tfalda_sim.video import VideoWriter
 
@@ -153,12 +155,14 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
           recover: bool = True, video: Path | None = None, camera_video: Path | None = None,
           max_steps: int | None = None,
           label: str = "", progress: bool = False, env: TfaldaTrackEnv | None = None,
-          camera: Camera | str = "thesis") -> DriveResult:
+          camera: Camera | str = "thesis", vehicle: str | DynamicsParams = "kinematic",
+          timing: str | Path | Timing = "ideal") -> DriveResult:
     """Drive ``laps`` laps of ``track`` from its start line at ``speed_m_s``. ``video``
     records the visualiser (lanes, ROIs, map), ``camera_video`` the bare grey camera
     frames (for ``tfalda-sim replay``). A Ctrl-C ends the drive early (``ended ==
     "interrupted"``) and keeps the videos of the frames driven so far. ``camera``: the
-    car's camera (a profile name, file or camera) when no ``env`` is given."""
+    car's camera (a profile name, file or camera), ``vehicle`` its model and ``timing``
+    its pipeline's timing (the env's arguments) when no ``env`` is given."""
     if laps < 1:
         raise ValueError(f"laps must be ≥ 1, got {laps}")
     if not track.closed:
@@ -166,7 +170,8 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
     if video and camera_video and Path(video).resolve() == Path(camera_video).resolve():
         raise ValueError("video and camera_video name the same file; give each its own")
     env = env or TfaldaTrackEnv(track=track, speed_m_s=speed_m_s, camera=camera,
-                                render_mode="rgb_array" if video else None)
+                                render_mode="rgb_array" if video else None,
+                                vehicle=vehicle, timing=timing)
     rate_hz = env.camera.frame_rate_hz
     if isinstance(agent, LanePid) and agent.camera is not env.camera:
         agent.use_camera(env.camera)  # the PID back-projects through the car's camera

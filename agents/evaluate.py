@@ -18,22 +18,25 @@ import numpy as np
 
 from tfalda_sim.camera import load_camera
 from tfalda_sim.parallel import stream
+from tfalda_sim.timing import Timing, resolve_timing
 from tfalda_sim.tracks import generate
 
 from .drive import check_agent, drive, make_agent
 
-Job = tuple[str, str | None, int, int, float, str, bool]
+Job = tuple[str, str | None, int, int, float, str, bool, str, Timing]
 
 
 def run_job(job: Job) -> dict[str, Any]:
-    """One run (agent, policy, seed, laps, speed, camera, trust the policy's pickles): the
-    picklable top-level function every backend runs; its result is its JSON record."""
-    kind, policy, seed, laps, speed, camera_spec, trust = job
+    """One run (agent, policy, seed, laps, speed, camera, trust the policy's pickles,
+    vehicle, timing): the picklable top-level function every backend runs; its result is
+    its JSON record. The timing travels read (a worker on another host need not have its
+    file)."""
+    kind, policy, seed, laps, speed, camera_spec, trust, vehicle, timing = job
     track = generate(seed).with_elements(obstacles=())  # lane keeping: no cartons to avoid
     camera = load_camera(camera_spec)
     agent = make_agent(kind, policy, camera, trust_policy=trust)
     result = drive(agent, track, laps=laps, speed_m_s=speed, recover=False,
-                   label=f"seed {seed}", camera=camera)
+                   label=f"seed {seed}", camera=camera, vehicle=vehicle, timing=timing)
     if result.ended == "interrupted":  # drive() stops at Ctrl-C; the sweep must stop too
         raise KeyboardInterrupt
     return {"seed": seed, "speed_m_s": speed, "success": result.laps_completed == laps,
@@ -41,29 +44,33 @@ def run_job(job: Job) -> dict[str, Any]:
 
 
 def evaluation_jobs(kind: str, policy: str | None, seeds: range, laps: int,
-                    speeds: tuple[float, ...], camera: str, trust_policy: bool = False
+                    speeds: tuple[float, ...], camera: str, trust_policy: bool = False,
+                    vehicle: str = "kinematic", timing: str | Timing = "ideal"
                     ) -> Iterator[Job]:
     """The runs, generated as they are needed: every seed at the first speed, then at the
     next."""
+    resolved = resolve_timing(timing)
     for speed in speeds:
         for seed in seeds:
-            yield kind, policy, seed, laps, speed, camera, trust_policy
+            yield kind, policy, seed, laps, speed, camera, trust_policy, vehicle, resolved
 
 
 def iter_evaluate(kind: str, seeds: range, *, laps: int = 3,
                   speeds: tuple[float, ...] = (1.5,), policy: str | None = None,
-                  workers: int = 1, camera: str = "thesis", trust_policy: bool = False
+                  workers: int = 1, camera: str = "thesis", trust_policy: bool = False,
+                  vehicle: str = "kinematic", timing: str | Timing = "ideal"
                   ) -> Iterator[dict[str, Any]]:
     """One run per (speed, seed), streamed from ``workers`` processes in that order;
     ``camera`` a profile name or file (the workers load it); ``trust_policy`` as
-    ``make_agent``'s."""
+    ``make_agent``'s; ``vehicle`` and ``timing`` the env's."""
     repeated = [v for k, v in enumerate(speeds) if v in speeds[:k]]
     if repeated:  # its runs would be made twice and pooled with themselves
         raise ValueError(f"{repeated[0]:g} m/s is named twice in speeds {speeds}")
     # Fail early on a bad agent or camera.
     check_agent(kind, policy, load_camera(camera), trust_policy=trust_policy)
     yield from stream(run_job, evaluation_jobs(kind, policy, seeds, laps, speeds, camera,
-                                               trust_policy), workers=workers)
+                                               trust_policy, vehicle, timing),
+                      workers=workers)
 
 
 def run_record(job: Job, run: dict[str, Any]) -> dict[str, Any]:
@@ -84,9 +91,12 @@ def check_run_record(job: Job, rec: dict[str, Any]) -> None:
 
 def result_document(kind: str, policy: str | None, camera: str, laps: int, seeds: range,
                     speeds: tuple[float, ...], runs: list[dict[str, Any]],
-                    interrupted: bool, worker_died: str | None) -> dict[str, Any]:
-    """The evaluation's result: per speed the success rate and figures, and every run."""
-    return {"agent": kind, "policy": policy, "camera": camera, "laps": laps,
+                    interrupted: bool, worker_died: str | None, vehicle: str = "kinematic",
+                    timing: str = "ideal") -> dict[str, Any]:
+    """The evaluation's result: per speed the success rate and figures, and every run
+    (``timing`` as given: a name or a file)."""
+    return {"agent": kind, "policy": policy, "camera": camera, "vehicle": vehicle,
+            "timing": timing, "laps": laps,
             "seeds": [seeds.start, seeds.stop],
             "speeds": summarise(runs, speeds), "runs": runs, "interrupted": interrupted,
             "worker_died": worker_died}

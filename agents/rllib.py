@@ -37,7 +37,7 @@ from tqdm import tqdm
 from tfalda_sim.interrupts import INTERRUPTS, STOP_SIGNALS, ignoring_stops, is_interrupt
 from tfalda_sim.parallel import RayUnavailable, check_ray_address
 
-from .train import TRAIN_SEEDS, TRAIN_SPEED_M_S, PpoConfig, env_kwargs
+from .train import TRAIN_SEEDS, TRAIN_SPEED_M_S, PpoConfig, env_kwargs, vehicle_flags
 
 ENV_NAME: str = "tfalda-sim/TfaldaTrack-v0"
 """The env's name in Ray Tune's registry (what ``PPOConfig.environment`` is given)."""
@@ -109,17 +109,20 @@ def register_env() -> None:
 
 
 def env_config(speed_m_s: float = TRAIN_SPEED_M_S, track: str | int | None = None,
-               camera: str = "thesis") -> dict[str, Any]:
+               camera: str = "thesis", vehicle: str = "kinematic",
+               timing: str = "ideal") -> dict[str, Any]:
     """The env's keyword arguments as RLlib's ``env_config``: sb3's (``env_kwargs``: a new
     generated track each reset from ``TRAIN_SEEDS``, or always ``track``; the camera) and
     the observation mode, "lanes" (the lane entries, speed and wheel angle). A camera
     file is read here and shipped as the camera itself: a cluster's nodes need not have
-    the file."""
+    the file; so is a timing file (``vehicle`` and ``timing`` as the env's)."""
     from tfalda_sim.camera import NAMED_CAMERAS, load_camera
+    from tfalda_sim.timing import TIMINGS, load_timing
 
     cam: Any = camera if camera in NAMED_CAMERAS else load_camera(camera)
-    return env_kwargs(speed_m_s, TRAIN_SEEDS, track=track, camera=cam) | {
-        "observation": "lanes"}
+    tim: Any = timing if timing in TIMINGS else load_timing(timing)
+    return env_kwargs(speed_m_s, TRAIN_SEEDS, track=track, camera=cam, vehicle=vehicle,
+                      timing=tim) | {"observation": "lanes"}
 
 
 def ppo_config(env_cfg: dict[str, Any], cfg: RllibConfig, seed: int) -> Any:
@@ -339,6 +342,7 @@ def train_rllib(timesteps: int, seed: int, out: Path, *, config: RllibConfig | N
                 speed_m_s: float = TRAIN_SPEED_M_S, track: str | int | None = None,
                 camera: str = "thesis", address: str | None = None,
                 num_cpus: int | None = None, progress: bool = True,
+                vehicle: str = "kinematic", timing: str = "ideal",
                 on_iteration: Callable[[Iteration, int], None] | None = None
                 ) -> dict[str, Any]:
     """Train PPO with RLlib for ``ceil(timesteps / train_batch)`` iterations and save it
@@ -358,7 +362,7 @@ def train_rllib(timesteps: int, seed: int, out: Path, *, config: RllibConfig | N
     iterations = max(1, -(-timesteps // cfg.train_batch))
     ray = import_rllib()
     register_env()
-    env_cfg = env_config(speed_m_s, track, camera)
+    env_cfg = env_config(speed_m_s, track, camera, vehicle, timing)
     session = contextlib.ExitStack()  # Ray, shut down last
     shield = contextlib.ExitStack()  # after a Ctrl-C: ignore the next while saving
     algo = None
@@ -421,7 +425,7 @@ def train_rllib(timesteps: int, seed: int, out: Path, *, config: RllibConfig | N
                 raise KeyboardInterrupt
             raise RllibUnavailable(f"the training failed before its first iteration: {failed}")
         summary = _summary(timesteps, seed, speed_m_s, track, camera, cfg, address, out,
-                           iterations, done, elapsed)
+                           iterations, done, elapsed, vehicle, timing)
         summary.update(interrupted=interrupted, failed=failed)
         (staging / "train.json").write_text(json.dumps(summary, indent=2))
         _publish(staging, out)
@@ -439,13 +443,15 @@ def train_rllib(timesteps: int, seed: int, out: Path, *, config: RllibConfig | N
 
 def _summary(timesteps: int, seed: int, speed_m_s: float, track: str | int | None,
              camera: str, cfg: RllibConfig, address: str | None, out: Path, iterations: int,
-             done: list[Iteration], elapsed: float) -> dict[str, Any]:
+             done: list[Iteration], elapsed: float, vehicle: str = "kinematic",
+             timing: str = "ideal") -> dict[str, Any]:
     import ray
 
     cam = camera
     last = done[-1]
     return {"backend": "rllib", "timesteps": timesteps, "seed": seed, "speed_m_s": speed_m_s,
-            "camera": cam, "track": track, "train_seeds": list(TRAIN_SEEDS),
+            "camera": cam, "vehicle": vehicle, "timing": timing, "track": track,
+            "train_seeds": list(TRAIN_SEEDS),
             "iterations": iterations, "iterations_done": len(done),
             "timesteps_done": last.env_steps_total,
             "episode_return_mean": last.episode_return_mean,
@@ -462,6 +468,7 @@ def _summary(timesteps: int, seed: int, speed_m_s: float, track: str | int | Non
                         f"--seed {seed} --speed {speed_m_s:g} --out {out}"
                         + (f" --ray-address {address}" if address else "")
                         + (f" --camera {cam}" if cam != "thesis" else "")
+                        + vehicle_flags(vehicle, timing)
                         + (f"  (Python: track={track!r})" if track is not None else ""))}
 
 

@@ -43,6 +43,7 @@ from tfalda_sim.faults import (
 )
 from tfalda_sim.parallel import stream
 from tfalda_sim.perception import DetectorConfig
+from tfalda_sim.timing import TIMINGS, Timing, resolve_timing
 from tfalda_sim.tracks import Lane, Obstacle, Track, generate
 from tfalda_sim.tracks.dimensions import MAX_MARKING_GAP_M
 
@@ -126,10 +127,10 @@ def _track_for(seed: int, fault: str, s_onset: float) -> Track:
     return track
 
 
-def run_one(seed: int, fault: str, roi_reset_stage: bool, camera: str = "thesis"
-            ) -> StressRun:
+def run_one(seed: int, fault: str, roi_reset_stage: bool, camera: str = "thesis",
+            vehicle: str = "kinematic", timing: str | Timing = "ideal") -> StressRun:
     """One closed-loop drive with ``fault`` on generated track ``seed`` by a car with
-    ``camera`` (a profile name or file)."""
+    ``camera`` (a profile name or file), ``vehicle`` and ``timing`` (the env's)."""
     case = FAULTS[fault]
     base = generate(seed).with_elements(obstacles=())
     speed = FAST_CURVE_SPEED_M_S if fault == "fast_curve" else SPEED_M_S
@@ -144,7 +145,7 @@ def run_one(seed: int, fault: str, roi_reset_stage: bool, camera: str = "thesis"
     if not roi_reset_stage:
         cfg = replace(cfg, lis=replace(cfg.lis, roi_reset=False))
     env = TfaldaTrackEnv(track=track, speed_m_s=speed, detector=cfg, camera=camera,
-                         obstacles=fault == "obstacle")
+                         obstacles=fault == "obstacle", vehicle=vehicle, timing=timing)
     obs, _ = env.reset(seed=seed, options={"start": (start_s, -0.5 * track.lane_width_m, 0.0),
                                            "faults": case.make(s_onset)})
     pid = LanePid(camera=env.camera)
@@ -186,8 +187,9 @@ def _tightest_curve_start(track: Track) -> float:
     return float(t.s0[k])
 
 
-StressJob = tuple[int, str, bool, str]
-"""(seed, fault, reset stage on, camera): one run of the battery."""
+StressJob = tuple[int, str, bool, str] | tuple[int, str, bool, str, str, Timing]
+"""(seed, fault, reset stage on, camera[, vehicle, timing]): one run of the battery; the
+vehicle and the timing only when they are not the default car's."""
 
 
 def run_job(job: StressJob) -> StressRun:
@@ -203,7 +205,7 @@ def run_record(job: StressJob, run: StressRun) -> dict[str, Any]:
 def check_run_record(job: StressJob, rec: dict[str, Any]) -> None:
     """A stored record belongs to ``job`` and reads back as a ``StressRun``, else
     ValueError."""
-    seed, fault, stage, _ = job
+    seed, fault, stage = job[:3]
     got = (rec.get("seed"), rec.get("fault"), rec.get("roi_reset_stage"))
     if got != (seed, fault, stage):
         raise ValueError(f"it holds the run (seed, fault, reset stage) {got}, the sweep's "
@@ -228,15 +230,20 @@ def check_fault_names(faults: Sequence[str] | None) -> list[str]:
     return names
 
 
-def battery_jobs(seeds: Iterable[int], faults: Sequence[str], camera: str = "thesis"
-                 ) -> Iterator[tuple[int, str, bool, str]]:
-    """(seed, fault, reset stage, camera) for every run, seed by seed: a long range
-    interrupted early has every fault of the seeds it reached, and the jobs are never all
-    in memory."""
+def battery_jobs(seeds: Iterable[int], faults: Sequence[str], camera: str = "thesis",
+                 vehicle: str = "kinematic", timing: str | Timing = "ideal"
+                 ) -> Iterator[StressJob]:
+    """(seed, fault, reset stage, camera[, vehicle, timing]) for every run, seed by seed:
+    a long range interrupted early has every fault of the seeds it reached, and the jobs
+    are never all in memory. The timing travels read (a worker on another host need not
+    have its file)."""
+    resolved = resolve_timing(timing)
+    env = () if vehicle == "kinematic" and resolved == TIMINGS["ideal"] else (vehicle,
+                                                                               resolved)
     for seed in seeds:
         for fault in faults:
             for stage in (True, False):
-                yield int(seed), fault, stage, camera
+                yield (int(seed), fault, stage, camera, *env)
 
 
 def iter_battery(seeds: Iterable[int], faults: Sequence[str] | None = None, *,

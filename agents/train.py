@@ -78,10 +78,13 @@ def distribution_checks_off() -> Iterator[None]:
 
 
 def env_kwargs(speed_m_s: float = TRAIN_SPEED_M_S, seeds: tuple[int, int] = TRAIN_SEEDS,
-               track: str | int | None = None, camera: str = "thesis") -> dict[str, Any]:
+               track: str | int | None = None, camera: Any = "thesis",
+               vehicle: str = "kinematic", timing: Any = "ideal") -> dict[str, Any]:
     """Arguments of the training env: a new generated track each reset from ``seeds``
-    (or always ``track``), seen by ``camera`` (a profile name or file)."""
-    return {"track": track, "track_seeds": seeds, "speed_m_s": speed_m_s, "camera": camera}
+    (or always ``track``), seen by ``camera`` (a profile name or file), the car
+    ``vehicle`` with the pipeline's ``timing`` (a name, a timing file or a ``Timing``)."""
+    return {"track": track, "track_seeds": seeds, "speed_m_s": speed_m_s, "camera": camera,
+            "vehicle": vehicle, "timing": timing}
 
 
 OUT_FILES: tuple[str, ...] = ("policy.zip", "train.json", "tb/", "checkpoints/")
@@ -165,10 +168,12 @@ def _existing_ancestor(path: Path) -> Path:
 def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfig | None = None,
           speed_m_s: float = TRAIN_SPEED_M_S, progress: bool = True,
           subprocess: bool = True, track: str | int | None = None, camera: str = "thesis",
-          checkpoint_steps: int = 100_000) -> dict[str, Any]:
+          checkpoint_steps: int = 100_000, vehicle: str = "kinematic",
+          timing: str = "ideal") -> dict[str, Any]:
     """Train PPO and save it under ``out``; returns the summary written to train.json.
     ``track`` fixes the track (default: the generated ``TRAIN_SEEDS``); ``camera`` is the
-    car's camera (a profile name or file).
+    car's camera (a profile name or file), ``vehicle`` its model and ``timing`` its
+    pipeline's timing (a name or a timing file).
 
     The run is written to a staging folder beside ``out`` and moved into ``out`` when it
     ends: an error leaves ``out`` as it was. A Ctrl-C ends the training early and keeps
@@ -205,7 +210,8 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
         # TfaldaTrackVectorEnv through SB3's VecEnv API: this process steps the first
         # slice of envs, a worker per further core the others (agents/vec_env.py).
         venv = make_sb3_vec_env(n_envs, seed, workers=None if subprocess else 1,
-                                **env_kwargs(speed_m_s, track=track, camera=camera))
+                                **env_kwargs(speed_m_s, track=track, camera=camera,
+                                             vehicle=vehicle, timing=timing))
         interrupted = False
         try:
             lr = cfg.learning_rate
@@ -250,7 +256,7 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
             # leaves waiting is terminated after 5 s (TfaldaTrackVectorEnv.close).
             venv.close()
         summary = _summary(timesteps, n_envs, seed, speed_m_s, track, cfg, elapsed, out,
-                           camera)
+                           camera, vehicle, timing)
         summary.update(interrupted=interrupted, timesteps_done=int(model.num_timesteps),
                        steps_per_s=model.num_timesteps / elapsed if elapsed > 0 else None)
         (staging / "train.json").write_text(json.dumps(summary, indent=2))
@@ -266,9 +272,10 @@ def train(timesteps: int, n_envs: int, seed: int, out: Path, *, config: PpoConfi
 
 def _summary(timesteps: int, n_envs: int, seed: int, speed_m_s: float,
              track: str | int | None, cfg: PpoConfig, elapsed: float, out: Path,
-             camera: str = "thesis") -> dict[str, Any]:
+             camera: str = "thesis", vehicle: str = "kinematic",
+             timing: str = "ideal") -> dict[str, Any]:
     return {"timesteps": timesteps, "n_envs": n_envs, "seed": seed, "speed_m_s": speed_m_s,
-            "camera": camera,
+            "camera": camera, "vehicle": vehicle, "timing": timing,
                "track": track, "train_seeds": list(TRAIN_SEEDS), "config": asdict(cfg) | {
                    "net_arch": list(cfg.net_arch)},
                "train_time_s": elapsed, "cores": os.cpu_count(),
@@ -277,4 +284,12 @@ def _summary(timesteps: int, n_envs: int, seed: int, speed_m_s: float,
                "command": (f"tfalda-sim train --timesteps {timesteps} --n-envs {n_envs} "
                            f"--seed {seed} --speed {speed_m_s:g} --out {out}"
                            + (f" --camera {camera}" if camera != "thesis" else "")
+                           + vehicle_flags(vehicle, timing)
                            + (f"  (Python: track={track!r})" if track is not None else ""))}
+
+
+def vehicle_flags(vehicle: str, timing: str) -> str:
+    """The ``--vehicle`` and ``--timing`` of a run's repeating command (none at their
+    defaults)."""
+    return ((f" --vehicle {vehicle}" if vehicle != "kinematic" else "")
+            + (f" --timing {timing}" if timing != "ideal" else ""))
