@@ -1,12 +1,14 @@
 """Stress test of the ROI reset logic: faults injected into closed-loop drives.
 
-Each run: the PID drives a generated track from its start line at 1.5 m/s; after
-``ONSET_STEP`` frames one fault of the battery strikes (``FAULTS``), and the drive goes on
-for ``AFTER_STEPS`` frames after the fault has ended. Every fault is run with the thesis'
-LIS and with its reset stage switched off (``LisConfig(roi_reset=False)``), and a run without
-any fault counts the resets that happen anyway. Per run:
+Each run: the PID drives a generated track from its start line at 1.5 m/s; ``ONSET_S``
+seconds in one fault of the battery strikes (``FAULTS``), and the drive goes on for
+``AFTER_S`` seconds after the fault has ended. The battery is in seconds and metres
+(``tfalda_sim.faults``): on any camera its frames are counted at that camera's frame
+rate. Every fault is run with the thesis' LIS and with its reset stage switched off
+(``LisConfig(roi_reset=False)``), and a run without any fault counts the resets that
+happen anyway. Per run:
 
-- ``reset``: the LIS reset between the onset and ``AFTER_STEPS`` frames after the end;
+- ``reset``: the LIS reset between the onset and ``AFTER_S`` after the end;
 - ``frames_to_recover``: frames from the fault's end until the lanes are valid again —
   the detector's hit rate (from the track geometry) ≥ ``VALID_HIT_RATE`` for
   ``VALID_FRAMES`` frames in a row; None if they never are;
@@ -36,10 +38,15 @@ from tfalda_sim.faults import (
     Blackout,
     CameraShake,
     Fault,
+    FrameDropBurst,
     Glare,
+    LatencySpike,
     LateralKick,
     MarkingGap,
     Overexposure,
+    ServoOffset,
+    WetPatch,
+    frame_at,
 )
 from tfalda_sim.parallel import stream
 from tfalda_sim.perception import DetectorConfig
@@ -49,11 +56,14 @@ from tfalda_sim.tracks.dimensions import MAX_MARKING_GAP_M
 
 from .pid import LanePid
 
-ONSET_STEP: int = 150
-"""Frame at which the fault strikes (3 s into the drive) [frames]."""
+ONSET_S: float = 3.0
+"""Time at which the fault strikes [s] (frame 150 of the thesis camera)."""
 
-AFTER_STEPS: int = 150
-"""Frames driven after the fault's end [frames]."""
+AFTER_S: float = 3.0
+"""Time driven after the fault's end [s]."""
+
+THESIS_FRAME_S: float = 1.0 / 50.0
+"""One frame of the thesis camera (50 frames/s) [s]: the length of a one-frame fault."""
 
 VALID_HIT_RATE: float = 0.75
 """The lanes count as valid from this mean hit rate on (the thesis' 0.75 line) [-]."""
@@ -70,34 +80,59 @@ FAST_CURVE_SPEED_M_S: float = 3.0
 
 @dataclass(frozen=True)
 class Case:
-    """One fault of the battery: its name, how long it lasts [frames] and how to make
-    it for a drive that passes arc length ``s_onset`` [m] at the onset."""
+    """One fault of the battery: its name, how long it lasts [s] (until its effect on
+    the observations is over; 0: no fault) and how to make it for a drive that passes
+    arc length ``s_onset`` [m] at the onset."""
 
     name: str
-    duration: int
+    duration_s: float
     make: Callable[[float], tuple[Fault, ...]]
 
 
-def _battery(start: int) -> dict[str, Case]:
+LATENCY_SPIKE_S: tuple[float, float] = (0.5, 0.2)
+"""The latency spike's window and extra delay [s]: for half a second the results come
+10 thesis frames late (a stall of the processing, e.g. another process taking the CPU
+of a prototype that ran at 100 % load, thesis 1.1)."""
+
+WET_PATCH_M: float = 1.0
+"""Length of the wet patch [m], laid where the car is at the onset."""
+
+SERVO_OFFSET_RAD: float = 0.05
+"""The knocked servo horn's offset [rad] (≈ 3°): a chosen stress, not a measured one —
+less than one tooth of a 25-tooth servo spline (14.4°), as a horn slipped on a worn
+spline or a bent steering link."""
+
+
+def _battery(start: float) -> dict[str, Case]:
     ahead = SPEED_M_S * 0.2  # the gap starts a little ahead of the car at the onset
+    window, extra = LATENCY_SPIKE_S
     return {c.name: c for c in (
-        Case("none", 0, lambda s: ()),
-        Case("blackout", 25, lambda s: (Blackout(start, 25),)),
-        Case("overexposed", 25, lambda s: (Overexposure(start, 25, gain=4.0),)),
-        Case("glare", 50, lambda s: (Glare(start, 50, u_px=520.0, v_px=380.0, radius_px=70.0,
-                                           peak_dn=220.0),)),
-        Case("marking_gap", int(MAX_MARKING_GAP_M / SPEED_M_S * 50), lambda s: (
+        Case("none", 0.0, lambda s: ()),
+        Case("blackout", 0.5, lambda s: (Blackout(start, 0.5),)),
+        Case("overexposed", 0.5, lambda s: (Overexposure(start, 0.5, gain=4.0),)),
+        # A reflection over the lower-right ROI: at pixel (520, 380) with a 70 px radius
+        # on the thesis camera.
+        Case("glare", 1.0, lambda s: (Glare(start, 1.0, ahead_m=0.26, left_m=-0.18,
+                                            radius_m=0.115, peak_dn=220.0),)),
+        Case("marking_gap", MAX_MARKING_GAP_M / SPEED_M_S, lambda s: (
             MarkingGap(s + ahead + 0.8, MAX_MARKING_GAP_M),)),
-        Case("lateral_kick", 1, lambda s: (LateralKick(start, 0.12),)),
-        Case("camera_shake", 50, lambda s: (CameraShake(start, 50, amplitude_rad=0.03),)),
-        # A carton on the left lane 1.2 m ahead (see _track_for), passed in ≈ 50 frames.
-        Case("obstacle", 50, lambda s: ()),
-        # The tightest curve entered at 2× speed (see run_one): 3 m of it in 50 frames.
-        Case("fast_curve", 50, lambda s: ()),
+        Case("lateral_kick", THESIS_FRAME_S, lambda s: (LateralKick(start, 0.12),)),
+        Case("camera_shake", 1.0, lambda s: (CameraShake(start, 1.0, amplitude_rad=0.03),)),
+        # A carton on the left lane 1.2 m ahead (see _track_for), passed in ≈ 1 s.
+        Case("obstacle", 1.0, lambda s: ()),
+        # The tightest curve entered at 2× speed (see run_one): 3 m of it in 1 s.
+        Case("fast_curve", 1.0, lambda s: ()),
+        # Over when the last late result has arrived.
+        Case("latency_spike", window + extra, lambda s: (LatencySpike(start, window, extra),)),
+        Case("frame_drops", 0.5, lambda s: (FrameDropBurst(start, 0.5),)),
+        # From where the car is at the onset; only the dynamic car (--vehicle dynamic)
+        # feels it: the kinematic car drives as in the fault-free run.
+        Case("wet_patch", WET_PATCH_M / SPEED_M_S, lambda s: (WetPatch(s, WET_PATCH_M),)),
+        Case("servo_offset", 1.0, lambda s: (ServoOffset(start, 1.0, SERVO_OFFSET_RAD),)),
     )}
 
 
-FAULTS: dict[str, Case] = _battery(ONSET_STEP)
+FAULTS: dict[str, Case] = _battery(ONSET_S)
 """The battery, by name."""
 
 
@@ -138,8 +173,8 @@ def run_one(seed: int, fault: str, roi_reset_stage: bool, camera: str = "thesis"
     if fault == "fast_curve":
         # Start so that the onset falls on the entry of the tightest curve.
         s_arc = _tightest_curve_start(base)
-        start_s = (s_arc - speed * ONSET_STEP / 50.0) % base.length_m
-    s_onset = (start_s + speed * ONSET_STEP / 50.0) % base.length_m
+        start_s = (s_arc - speed * ONSET_S) % base.length_m
+    s_onset = (start_s + speed * ONSET_S) % base.length_m
     track = _track_for(seed, fault, s_onset)
     cfg = DetectorConfig.thesis()
     if not roi_reset_stage:
@@ -149,8 +184,12 @@ def run_one(seed: int, fault: str, roi_reset_stage: bool, camera: str = "thesis"
     obs, _ = env.reset(seed=seed, options={"start": (start_s, -0.5 * track.lane_width_m, 0.0),
                                            "faults": case.make(s_onset)})
     pid = LanePid(camera=env.camera)
-    end = ONSET_STEP + case.duration
-    steps = end + AFTER_STEPS
+    # The battery's seconds in this camera's frames, as the injector counts them.
+    rate = env.camera.frame_rate_hz
+    onset = frame_at(ONSET_S, rate)
+    after = frame_at(AFTER_S, rate)
+    end = onset + (max(1, frame_at(case.duration_s, rate)) if case.duration_s > 0 else 0)
+    steps = end + after
     hits, resets = [], []
     on_road = True
     for _ in range(steps):
@@ -172,9 +211,9 @@ def run_one(seed: int, fault: str, roi_reset_stage: bool, camera: str = "thesis"
         false = len(reset_steps)
         in_window = False
     else:
-        back = end + (recovered if recovered is not None else AFTER_STEPS)
-        in_window = any(ONSET_STEP <= k <= end + AFTER_STEPS for k in reset_steps)
-        false = sum(1 for k in reset_steps if k < ONSET_STEP or k > back + VALID_FRAMES)
+        back = end + (recovered if recovered is not None else after)
+        in_window = any(onset <= k <= end + after for k in reset_steps)
+        false = sum(1 for k in reset_steps if k < onset or k > back + VALID_FRAMES)
     return StressRun(seed=seed, fault=fault, roi_reset_stage=roi_reset_stage,
                      roi_reset=in_window, frames_to_recover=recovered, false_resets=false,
                      on_road=on_road, roi_resets=len(reset_steps))
@@ -266,8 +305,8 @@ class _Group:
 
 class StressTally:
     """The summary of a battery, updated run by run: memory bounded by the number of
-    faults (``frames_to_recover`` is a count in [0, AFTER_STEPS], kept as a histogram, so
-    the median is exact)."""
+    faults (``frames_to_recover`` is a count of the frames within ``AFTER_S``, kept as a
+    histogram, so the median is exact)."""
 
     def __init__(self) -> None:
         self._groups: dict[tuple[str, bool], _Group] = {}
@@ -376,5 +415,5 @@ as the runs finish), the summary (JSON, Markdown) and its chart."""
 def report_document(rows: Sequence[dict[str, Any]], runs: int) -> dict[str, Any]:
     """The content of ``stress.json``: the summary and the battery's constants."""
     return {"summary": list(rows), "runs": runs, "runs_file": REPORT_FILES["jsonl"],
-            "onset_step": ONSET_STEP, "after_steps": AFTER_STEPS,
+            "onset_s": ONSET_S, "after_s": AFTER_S,
             "valid_hit_rate": VALID_HIT_RATE, "valid_frames": VALID_FRAMES}

@@ -142,18 +142,16 @@ def check_triple(name: str, value: object, what: str) -> tuple[float, float, flo
 
 
 def _check_fault_fields(where: str, fault: object) -> None:
-    # The faults check only Python numbers in __post_init__; a numpy or string step would
-    # fail later, inside step(). Annotations are strings (postponed evaluation).
+    # A fault checks its fields when it is made; one made past that (object.__new__, a
+    # field set afterwards) is checked again here, named by its place in the schedule.
+    # Annotations are strings (postponed evaluation).
     for f in fields(fault):  # type: ignore[arg-type]
-        v = getattr(fault, f.name)
-        field = f"{where}: {type(fault).__name__}.{f.name}"
-        if f.type in ("int", int):
-            if not is_int(v):
-                raise TypeError(f"{field} must be an int, got {show(v)}")
-            if v < 1:  # the int fields are steps and durations
-                raise ValueError(f"{field} must be ≥ 1, got {show(v)}")
-        elif f.type in ("float", float):
-            check_real(field, v)
+        if f.type in ("float", float):
+            check_real(f"{where}: {type(fault).__name__}.{f.name}", getattr(fault, f.name))
+    try:
+        fault.__post_init__()  # type: ignore[attr-defined]
+    except (TypeError, ValueError) as exc:
+        raise type(exc)(f"{where}: {exc}") from None
 
 
 def check_fault_schedule(name: str, value: object) -> tuple[Fault, ...]:

@@ -259,8 +259,9 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
     road: ``|lateral_m| ≤ track.half_road_m``), ``s_m`` on an open track or within a lap
     of a closed one's start line, ``|heading_error_rad| ≤ π`` (``Track.check_place``),
     ``speed_m_s``, ``domain_randomization`` (bool) and ``faults`` (a schedule of
-    ``tfalda_sim.faults``: blackout, overexposure, glare, camera shake, lateral kick,
-    marking gap). Unknown keys raise ``ValueError``.
+    ``tfalda_sim.faults``, in seconds and metres: blackout, overexposure, glare, camera
+    shake, lateral kick, marking gap, latency spike, burst of dropped frames, wet patch,
+    servo offset). Unknown keys raise ``ValueError``.
 
     ## Episode End
     Terminated when the centre of the car leaves the road (beyond a side line's outer
@@ -467,7 +468,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             world.set_track(track)
             self._map = None
         self._track = track
-        self._faults = FaultInjector(faults, np.random.default_rng(fault_seed))
+        self._faults = FaultInjector(faults, np.random.default_rng(fault_seed), self.camera)
         key = (self._faults.track(track), effects, scene_seed)
         prepared, self._prepared_scene = self._prepared_scene, None
         if key != self._scene_key:
@@ -556,7 +557,8 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         track = self._prepared[1]
         effects, scene_seed, _, fault_seed = self._draw_episode(peek,
                                                                 self.domain_randomization)
-        faults = FaultInjector(self.default_faults, np.random.default_rng(fault_seed))
+        faults = FaultInjector(self.default_faults, np.random.default_rng(fault_seed),
+                               self.camera)
         key = (faults.track(track), effects, scene_seed)
         if self._prepared_scene is None or self._prepared_scene[0] != key:
             spare, self._spare_scene = self._spare_scene, None
@@ -693,11 +695,13 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
     # The stages of a step, in data-flow order; each takes what it needs and returns what
     # it made.
     def _simulate(self, action: tuple[float, ...]) -> tuple[float, float, float]:
-        """The car drives one frame (action → pymunk), then the world faults act; the
-        camera pose of this step's frame."""
+        """The car drives one frame (action → pymunk; a servo offset added to the
+        command), then the world faults act; the camera pose of this step's frame."""
         world = self._world
         assert world is not None
-        world.step(action[0] * self.car.max_steer_rad,
+        steer = action[0] * self.car.max_steer_rad
+        offset = self._faults.steer_offset(self._step_count + 1)
+        world.step(steer + offset if offset else steer,
                    throttle=action[1] if self.throttle else None)
         self._step_count += 1
         return self._faults.world(self._step_count, world)
@@ -707,19 +711,22 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         """The observation the agent gets at this step (``timing``): this step's frame
         (ideal timing), or the newest result that has arrived — frames take
         ``camera_latency_s`` plus up to ``jitter_s`` through the pipeline, in the order
-        they were taken, and a dropped frame never arrives."""
-        timing = self.episode_timing
-        if timing.ideal:
+        they were taken, and a dropped frame never arrives. The delivery faults act here:
+        a frame of a burst is dropped, a latency spike adds to the delay."""
+        timing, faults = self.episode_timing, self._faults
+        if timing.ideal and not faults.delivers:
             return self._observe(camera_pose)
         world, rng = self._world, self._timing_rng
-        assert world is not None and rng is not None
+        assert world is not None
         now = self._step_count * world.frame_dt_s
         dropped = (timing.frame_drop_probability > 0.0
-                   and rng.random() < timing.frame_drop_probability)
-        if not dropped:
+                   and rng.random() < timing.frame_drop_probability)  # type: ignore[union-attr]
+        lost, extra_s = faults.delivery(self._step_count)
+        if not (dropped or lost):
             obs, frame = self._observe(camera_pose)
-            delay = timing.camera_latency_s + (rng.uniform(0.0, timing.jitter_s)
-                                               if timing.jitter_s > 0.0 else 0.0)
+            delay = timing.camera_latency_s + extra_s + (
+                rng.uniform(0.0, timing.jitter_s)  # type: ignore[union-attr]
+                if timing.jitter_s > 0.0 else 0.0)
             if self._in_flight:  # one pipeline: a result never overtakes an earlier one
                 delay = max(delay, self._in_flight[-1][0] - now)
             self._in_flight.append((now + delay, obs, frame))

@@ -96,9 +96,11 @@ def rollouts() -> dict[str, str]:
     from tfalda_sim.faults import Blackout, CameraShake, Glare, LateralKick
 
     out: dict[str, str] = {}
-    faults = (Blackout(30, 5), Glare(60, 10, u_px=500.0, v_px=380.0, radius_px=60.0,
-                                     peak_dn=200.0), CameraShake(90, 10, amplitude_rad=0.02),
-              LateralKick(120, 0.05))
+    # At 50 frames/s: a blackout from step 30 for 5 frames, a glare at pixel (500, 380)
+    # with a 60 px radius from step 60 for 10, a shake from step 90 for 10, a kick at 120.
+    faults = (Blackout(0.6, 0.1), Glare(1.2, 0.2, ahead_m=0.265, left_m=-0.154,
+                                        radius_m=0.098, peak_dn=200.0),
+              CameraShake(1.8, 0.2, amplitude_rad=0.02), LateralKick(2.4, 0.05))
     for mode in ("lanes", "image", "dict"):
         for dr in (False, True):
             env = gym.make("TfaldaTrack-v0", observation=mode, domain_randomization=dr,

@@ -25,6 +25,14 @@ def oval_env() -> TfaldaTrackEnv:
     return TfaldaTrackEnv(track="oval")
 
 
+def _unchecked(cls: type, **values: object) -> object:
+    """A fault with ``values`` set past its own checks: the env checks it again."""
+    fault = object.__new__(cls)
+    for name, value in values.items():
+        object.__setattr__(fault, name, value)
+    return fault
+
+
 def raises(exc: type[Exception], *parts: str) -> pytest.RaisesContext:
     """``pytest.raises`` whose message must contain every part, in order."""
     return pytest.raises(exc, match=".*".join(map(re.escape, parts)))
@@ -122,11 +130,12 @@ BAD_ARGUMENTS = [
     ("max_laps", "2", TypeError, "int"),
     ("faults", "no", TypeError, "sequence"),
     ("faults", None, TypeError, "sequence"),
-    ("faults", Blackout(step=3), TypeError, "sequence"),
+    ("faults", Blackout(start_s=0.06, duration_s=0.02), TypeError, "sequence"),
     ("faults", ["blackout"], TypeError, "Blackout", "faults[0]: unknown fault 'blackout'"),
-    ("faults", [Blackout(step="3")], TypeError, "int", "faults[0]: Blackout.step"),
-    ("faults", [Blackout(2), Blackout(step=np.int64(0))], ValueError, "≥ 1",
-     "faults[1]: Blackout.step"),
+    ("faults", [_unchecked(Blackout, start_s="3", duration_s=0.02)], TypeError, "real number",
+     "faults[0]: Blackout.start_s"),
+    ("faults", [Blackout(0.04, 0.02), _unchecked(Blackout, start_s=1.0, duration_s=np.int64(0))],
+     ValueError, "> 0", "faults[1]: Blackout.duration_s"),
 ]
 
 
@@ -227,7 +236,8 @@ def test_a_bad_reset_option_names_itself_the_value_and_what_is_accepted(
 def test_valid_reset_options_of_other_types(oval_env: TfaldaTrackEnv) -> None:
     _, info = oval_env.reset(seed=0, options={
         "start": np.array([4.0, -0.15, 0.05]), "speed_m_s": np.float32(2.5),
-        "domain_randomization": np.bool_(False), "faults": (Blackout(step=np.int64(2)),)})
+        "domain_randomization": np.bool_(False),
+        "faults": (Blackout(start_s=np.int64(2), duration_s=np.float32(0.5)),)})
     assert info["s_m"] == pytest.approx(4.0, abs=1e-6) and info["speed_m_s"] == 2.5
     _, same = oval_env.reset(seed=0, options={"start": [4, -0.15, 0.05], "speed_m_s": 2.5})
     assert same["s_m"] == info["s_m"] and same["cross_track_m"] == info["cross_track_m"]
@@ -245,7 +255,7 @@ def test_a_refused_reset_leaves_the_episode_as_it_was() -> None:
         env.reset(seed=1)
         env.step(np.array([0.2], np.float32))
     with pytest.raises(TypeError):
-        a.reset(seed=5, options={"faults": [Blackout(step=1)], "speed_m_s": "fast"})
+        a.reset(seed=5, options={"faults": [Blackout(0.02, 0.02)], "speed_m_s": "fast"})
     for _ in range(5):
         obs_a, reward_a, *_ = a.step(np.array([0.1], np.float32))
         obs_b, reward_b, *_ = b.step(np.array([0.1], np.float32))
@@ -266,12 +276,12 @@ def test_fault_sizes_are_refused_when_the_fault_is_made() -> None:
     huge glare or shake overflowed inside step() before."""
     from tfalda_sim.faults import CameraShake, Glare
 
-    for make, field in ((lambda: LateralKick(step=2, offset_m=np.float32("nan")),
+    for make, field in ((lambda: LateralKick(0.04, offset_m=np.float32("nan")),
                          "LateralKick.offset_m"),
-                        (lambda: LateralKick(step=2, offset_m=1e6), "LateralKick.offset_m"),
-                        (lambda: Glare(1, 5, radius_px=1e300), "Glare.radius_px"),
-                        (lambda: Glare(1, 5, peak_dn=1e9), "Glare.peak_dn"),
-                        (lambda: CameraShake(1, 2, amplitude_rad=1e308),
+                        (lambda: LateralKick(0.04, offset_m=1e6), "LateralKick.offset_m"),
+                        (lambda: Glare(0.02, 0.1, radius_m=1e300), "Glare.radius_m"),
+                        (lambda: Glare(0.02, 0.1, peak_dn=1e9), "Glare.peak_dn"),
+                        (lambda: CameraShake(0.02, 0.04, amplitude_rad=1e308),
                          "CameraShake.amplitude_rad")):
         with pytest.raises(ValueError, match=re.escape(field) + " must be finite and in"):
             make()

@@ -15,7 +15,17 @@ from hypothesis.extra import numpy as hnp
 
 from tfalda_sim.envs import TfaldaTrackEnv
 from tfalda_sim.envs.tfalda_track import RESET_OPTIONS
-from tfalda_sim.faults import Blackout, CameraShake, Glare, LateralKick, MarkingGap
+from tfalda_sim.faults import (
+    Blackout,
+    CameraShake,
+    FrameDropBurst,
+    Glare,
+    LatencySpike,
+    LateralKick,
+    MarkingGap,
+    ServoOffset,
+    WetPatch,
+)
 
 # derandomize: the same examples every run; no database: nothing written to the repo.
 FUZZ = settings(max_examples=300, deadline=None, derandomize=True, database=None,
@@ -56,11 +66,18 @@ ARRAYS = st.one_of(hnp.arrays(DTYPES, SHAPES),
                    hnp.arrays(np.dtype(object), SHAPES, elements=SCALARS))
 
 FAULTS = st.one_of(
-    st.builds(Blackout, step=st.integers(1, 5), duration=st.integers(1, 3)),
-    st.builds(LateralKick, step=st.integers(1, 5), offset_m=st.floats(-0.2, 0.2)),
-    st.builds(CameraShake, step=st.integers(1, 5)),
-    st.builds(Glare, step=st.integers(1, 5)),
+    st.builds(Blackout, start_s=st.floats(0, 0.1), duration_s=st.floats(0.001, 0.06)),
+    st.builds(LateralKick, start_s=st.floats(0, 0.1), offset_m=st.floats(-0.2, 0.2)),
+    st.builds(CameraShake, start_s=st.floats(0, 0.1), duration_s=st.floats(0.001, 0.06)),
+    st.builds(Glare, start_s=st.floats(0, 0.1), duration_s=st.floats(0.001, 0.06),
+              ahead_m=st.floats(-1, 3), left_m=st.floats(-1, 1)),
     st.builds(MarkingGap, s_m=st.floats(0, 20)),
+    st.builds(LatencySpike, start_s=st.floats(0, 0.1), duration_s=st.floats(0.001, 0.06),
+              extra_s=st.floats(0.001, 1.0)),
+    st.builds(FrameDropBurst, start_s=st.floats(0, 0.1), duration_s=st.floats(0.001, 0.06)),
+    st.builds(WetPatch, s_m=st.floats(0, 20), mu_scale=st.floats(0, 1)),
+    st.builds(ServoOffset, start_s=st.floats(0, 0.1), duration_s=st.floats(0.001, 0.06),
+              offset_rad=st.floats(-0.5, 0.5)),
 )
 
 
@@ -76,7 +93,12 @@ def _unchecked(cls: type, **values: object) -> object:
 
 # Faults with wrong field types or sizes.
 BAD_FAULTS = st.one_of(
-    st.builds(Blackout, step=st.sampled_from([np.int64(0), np.float32("nan"), "3", None, 1.5])),
+    st.builds(lambda v: _unchecked(Blackout, start_s=v, duration_s=0.02),
+              st.sampled_from([np.int64(-1), np.float32("nan"), "3", None, 1e300])),
+    st.builds(lambda v: _unchecked(LatencySpike, start_s=0.0, duration_s=0.02, extra_s=v),
+              st.sampled_from([0.0, -1.0, 5.0, "x"])),
+    st.builds(lambda v: _unchecked(WetPatch, s_m=1.0, length_m=1.0, mu_scale=v),
+              st.sampled_from([-0.1, 2.0, np.float32("inf")])),
     st.builds(lambda v: _unchecked(MarkingGap, s_m=v, length_m=1.0),
               st.sampled_from(["3", None, np.float32("nan")])),
     st.builds(lambda v: _unchecked(LateralKick, step=1, offset_m=v),

@@ -215,7 +215,7 @@ def test_an_open_track_truncates_at_its_end() -> None:
 
 
 def test_blackout_makes_the_lis_reset_and_recover() -> None:
-    env = TfaldaTrackEnv(track="oval", faults=[Blackout(step=20, duration=40)])
+    env = TfaldaTrackEnv(track="oval", faults=[Blackout(start_s=0.4, duration_s=0.8)])
     env.reset(seed=0, options={"start": (0.0, -0.2, 0.0)})
     resets, hits = [], []
     for _ in range(150):
@@ -229,7 +229,7 @@ def test_blackout_makes_the_lis_reset_and_recover() -> None:
 
 
 def test_lateral_kick_moves_the_car_sideways() -> None:
-    env = TfaldaTrackEnv(track="oval", faults=[LateralKick(step=5, offset_m=0.12)])
+    env = TfaldaTrackEnv(track="oval", faults=[LateralKick(start_s=0.1, offset_m=0.12)])
     env.reset(seed=0, options={"start": (0.0, -0.2, 0.0)})
     errors = [env.step(np.zeros(1, np.float32))[4]["cross_track_m"] for _ in range(6)]
     assert errors[4] - errors[3] == pytest.approx(0.12, abs=0.005)
@@ -249,7 +249,7 @@ def test_camera_frame_is_what_the_detector_saw_in_every_mode() -> None:
         env = TfaldaTrackEnv(track="oval", observation=mode)
         with pytest.raises(RuntimeError, match="reset"):
             env.camera_frame()
-        obs, _ = env.reset(seed=3, options={"faults": [Blackout(step=5)]})
+        obs, _ = env.reset(seed=3, options={"faults": [Blackout(start_s=0.1, duration_s=0.02)]})
         for _ in range(4):
             obs, *_ = env.step(np.full(1, 0.2, np.float32))
         frames[mode] = env.camera_frame()
