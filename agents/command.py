@@ -1,5 +1,6 @@
 """The agents' commands: ``drive`` (laps closed-loop), ``train`` (PPO), ``stress`` (the
-ROI reset logic under faults) and ``evaluate-agent`` (held-out tracks, speed sweep)."""
+ROI reset logic under faults), ``evaluate-agent`` (held-out tracks, speed sweep) and
+``limits`` (per track the highest speed the agent keeps its lane at)."""
 
 from __future__ import annotations
 
@@ -119,6 +120,7 @@ def register(sub: Any) -> None:
     _train_parser(sub)
     _stress_parser(sub)
     _evaluate_agent_parser(sub)
+    _limits_parser(sub)
 
 
 def _drive_parser(sub: Any) -> None:
@@ -608,4 +610,107 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
                 print(f"wrote {path}")
     files = [str(p) for p in (args.out, args.results) if p]
     return sweep_exit(end, f"kept the {len(runs)} of {jobs} runs that had finished"
+                           + (f" ({', '.join(files)})" if files else "") + resume_hint(args))
+
+
+def _limits_parser(sub: Any) -> None:
+    from .limits import LOWEST_SPEED_M_S, STEP_M_S
+    from .limits import TOP_SPEED_M_S as TOP
+    from .train import TEST_SEEDS
+
+    li = sub.add_parser(
+        "limits", help="per track, the highest constant speed an agent keeps its lane at",
+        description=f"Per held-out generated track (cartons removed), the highest constant "
+                    f"cruise speed at which the agent drives the laps without a departure, "
+                    f"found by bisection to {STEP_M_S:g} m/s between {LOWEST_SPEED_M_S:g} "
+                    f"m/s and the car's top speed ({TOP:g} m/s); reported as a "
+                    f"distribution. A track failed at {LOWEST_SPEED_M_S:g} m/s has no "
+                    f"limit (null, below_min_speed). Ctrl-C keeps the tracks finished so "
+                    f"far.")
+    li.add_argument("--agent", choices=["pid", "ppo"], default="pid", help=AGENT_HELP)
+    li.add_argument("--policy", type=Path, help="PPO policy .zip (default: the committed one)")
+    add_trust_policy_option(li)
+    li.add_argument("--seeds", type=seed_range_arg, default=range(*TEST_SEEDS),
+                    help=f"held-out seeds A:B (default: {TEST_SEEDS[0]}:{TEST_SEEDS[1]})")
+    li.add_argument("--laps", type=bounded_int_arg(1, 1000), default=2,
+                    help="laps each drive must complete without leaving the road, 1–1000 "
+                         "(default: %(default)s)")
+    add_sweep_options(li, "tracks")
+    add_camera_option(li)
+    add_vehicle_options(li)
+    li.add_argument("--out", type=Path, metavar="F.json",
+                    help="also write the JSON to this file (default: none)")
+    li.add_argument("--plot", type=Path, metavar="F.png",
+                    help="histogram of the limits (default: none)")
+    add_force_option(li, "an existing --out or --plot")
+    add_json_option(li)
+    li.set_defaults(func=cmd_limits)
+
+
+def cmd_limits(args: argparse.Namespace) -> int:
+    from tfalda_sim.outputs import Outputs
+    from tfalda_sim.sweep_runner import SweepSpec, read_results, resume_hint, run_sweep
+
+    from .drive import check_agent
+    from .limits import (
+        check_run_record,
+        limit_jobs,
+        plot,
+        result_document,
+        run_job,
+        run_record,
+        table,
+    )
+
+    check_sweep_options(args)
+    # --resume replaces the report of the run it continues (and its --results file).
+    check_outputs({"out": args.out, "plot": args.plot, "results": args.results},
+                  {"out": ".json", "plot": ".png", "results": ".jsonl"},
+                  args.force or args.resume,
+                  inputs={"policy": args.policy, "camera": camera_input(args.camera),
+                          "timing": timing_input(args.timing)})
+    camera = check_camera_geometry(args.camera)
+    timing = resolve_timing_arg(args.timing)
+    try:
+        check_agent(args.agent, args.policy, camera, trust_policy=args.trust_policy)
+    except (ValueError, FileNotFoundError, ImportError) as exc:
+        raise CliError(str(exc)) from None
+    jobs = len(args.seeds)
+    policy = None if args.policy is None else str(args.policy)
+    spec = SweepSpec(command="limits",
+                     config={"agent": args.agent, "policy": policy,
+                             "seeds": f"{args.seeds.start}:{args.seeds.stop}",
+                             "laps": args.laps, "camera": args.camera,
+                             "vehicle": args.vehicle, "timing": args.timing},
+                     jobs=limit_jobs(args.agent, policy, args.seeds, args.laps, args.camera,
+                                     args.trust_policy, args.vehicle, timing),
+                     total=jobs, fn=run_job, record=run_record, check=check_run_record)
+    resume = read_results(args.results, spec) if args.resume else None
+    backend = sweep_backend(args, jobs)
+    per_seed: list[dict[str, Any]] = []
+    with Outputs() as outs:
+        end = run_sweep(spec, backend, per_seed.append, resume=resume, progress=not args.json,
+                        results=None if args.results is None else outs.journal(
+                            args.results, keep_on_abort=args.resume),
+                        desc=f"{args.agent} limits", unit="track")
+        if not per_seed:
+            outs.abort()
+            return sweep_exit(end, "no track had finished; nothing written")
+        with holding_stops():  # a second Ctrl-C must not lose the first one's results
+            result = result_document(args.agent, policy, args.camera, args.vehicle,
+                                     args.timing, args.laps, args.seeds, per_seed,
+                                     end.interrupted, end.worker_died)
+            if args.out:
+                outs.path(args.out).write_text(json_text(result, indent=1), encoding="utf-8")
+            if args.plot:
+                plot(result, outs.path(args.plot))
+            outs.commit()
+    files = [str(p) for p in (args.out, args.plot, args.results) if p]
+    if args.json:
+        print(json_text(result))
+    else:
+        print(table(result))
+        for path in files:
+            print(f"wrote {path}")
+    return sweep_exit(end, f"kept the {len(per_seed)} of {jobs} tracks that had finished"
                            + (f" ({', '.join(files)})" if files else "") + resume_hint(args))

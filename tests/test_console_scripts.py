@@ -346,6 +346,22 @@ def test_evaluate_agent(tmp_path: Path) -> None:
     assert 0.0 <= speed["success_rate"] <= 1.0
 
 
+@covers("limits")
+def test_limits(tmp_path: Path) -> None:
+    doc = tfalda("limits", "--seeds", "10003:10004", "--laps", "1", "--workers", "1",
+                 "--vehicle", "dynamic", "--plot", "H.png", "--out", "L.json", "--json",
+                 cwd=tmp_path).json()
+    assert doc["agent"] == "pid" and doc["seeds"] == [10003, 10004] and doc["laps"] == 1
+    assert doc["vehicle"] == "dynamic" and doc["timing"] == "ideal"
+    assert doc["interrupted"] is False
+    (track,) = doc["per_seed"]
+    assert track["seed"] == 10003 and track["drives"]
+    assert track["limit_m_s"] is None or 0.5 <= track["limit_m_s"] <= 8.3
+    assert doc["summary"]["count"] == 1 and doc["summary"]["median_m_s"] == track["limit_m_s"]
+    assert json.loads((tmp_path / "L.json").read_text()) == doc
+    assert_png(tmp_path / "H.png")
+
+
 def _train(tmp_path: Path, *extra: str) -> Run:
     pytest.importorskip("stable_baselines3", reason="train needs the rl extra")
     return tfalda("train", "--timesteps", "64", "--n-envs", "1", "--out", "out/tr", *extra,

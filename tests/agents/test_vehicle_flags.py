@@ -19,6 +19,7 @@ COMMANDS = {
     "stress": ["stress", "--seeds", "0:1", "--faults", "none", "--out", "OUT"],
     "evaluate-agent": ["evaluate-agent", "--seeds", "0:1", "--laps", "1", "--out", "OUT.json"],
     "train": ["train", "--timesteps", "64", "--out", "OUT"],
+    "limits": ["limits", "--seeds", "0:1", "--laps", "1", "--out", "OUT.json"],
 }
 
 BAD = {
