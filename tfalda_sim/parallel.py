@@ -119,20 +119,34 @@ def _init_worker(parent_pid: int) -> None:
 
 def _terminate(pool: ProcessPoolExecutor) -> None:
     """Stop the workers now: an interrupted sweep does not wait for running jobs."""
+    # A worker killed while it writes a result into the result pipe leaves half a message
+    # there; the pool's manager thread then waits for the rest for ever — and so does the
+    # interpreter's exit, which joins that thread. This process's own copy of the pipe's
+    # writing end is all that keeps it open once the workers are dead: closed, the manager
+    # reads the end of the pipe, counts the pool as broken and ends. Taken before
+    # shutdown(), which drops the private handles.
+    results = getattr(pool, "_result_queue", None)
     terminate = getattr(pool, "terminate_workers", None)  # Python ≥ 3.14
     if terminate is not None:
+        procs = list((getattr(pool, "_processes", None) or {}).values())
         terminate()
-        return
-    # The private process table is the only handle before 3.14; shutdown() drops it, so
-    # take it first.
-    procs = list((getattr(pool, "_processes", None) or {}).values())
-    pool.shutdown(wait=False, cancel_futures=True)
-    for proc in procs:
-        with contextlib.suppress(Exception):
-            proc.terminate()
+    else:
+        # The private process table is the only handle before 3.14.
+        procs = list((getattr(pool, "_processes", None) or {}).values())
+        pool.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:
+            with contextlib.suppress(Exception):
+                proc.terminate()
     for proc in procs:
         with contextlib.suppress(Exception):
             proc.join(timeout=WORKER_JOIN_TIMEOUT_S)
+            if proc.is_alive():  # SIGTERM not acted on in time: no worker may outlive us
+                proc.kill()
+                proc.join(timeout=WORKER_JOIN_TIMEOUT_S)
+    writer = getattr(results, "_writer", None)
+    if writer is not None:
+        with contextlib.suppress(Exception):
+            writer.close()
 
 
 def _in_job_order(submit: Callable[[J], T], collect: Callable[[T], R], jobs: Iterable[J],

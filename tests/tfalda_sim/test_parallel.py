@@ -188,3 +188,32 @@ def _alive(pid: int) -> bool:
     except (FileNotFoundError, ProcessLookupError):
         return False
     return state != "Z"
+
+
+def test_a_sweep_stopped_while_a_worker_sends_its_result_exits(tmp_path: Path) -> None:
+    """A worker terminated while it writes a result into the pool's result pipe leaves
+    half a message there: the pool's manager thread then waited for the rest for ever, and
+    the interpreter's exit, which joins that thread, with it (an interrupted `evaluate`
+    on a busy host did not exit). Big results make the half-written message likely."""
+    script = tmp_path / "stop.py"
+    script.write_text(textwrap.dedent("""
+        from tfalda_sim.parallel import stream
+
+        def big(job):
+            return b"x" * (8 * 2**20)
+
+        if __name__ == "__main__":
+            results = stream(big, range(10**9), workers=2)
+            for k, _ in enumerate(results):
+                if k == 3:
+                    break
+            results.close()
+            print("closed", flush=True)
+    """))
+    for _ in range(4):  # each hung more often than not
+        try:
+            proc = subprocess.run([sys.executable, str(script)], capture_output=True,
+                                  text=True, timeout=60, check=False)
+        except subprocess.TimeoutExpired:
+            pytest.fail("the process did not exit within 60 s of closing the stream")
+        assert proc.returncode == 0 and proc.stdout == "closed\n", proc.stderr[-2000:]
