@@ -17,6 +17,7 @@ from tfalda_sim.cli_common import (
     CliError,
     add_force_option,
     add_json_option,
+    bounded_float_arg,
     bounded_int_arg,
     check_outputs,
     interrupted,
@@ -622,11 +623,11 @@ def _limits_parser(sub: Any) -> None:
         "limits", help="per track, the highest constant speed an agent keeps its lane at",
         description=f"Per held-out generated track (cartons removed), the highest constant "
                     f"cruise speed at which the agent drives the laps without a departure, "
-                    f"found by bisection to {STEP_M_S:g} m/s between {LOWEST_SPEED_M_S:g} "
-                    f"m/s and the car's top speed ({TOP:g} m/s); reported as a "
-                    f"distribution. A track failed at {LOWEST_SPEED_M_S:g} m/s has no "
-                    f"limit (null, below_min_speed). Ctrl-C keeps the tracks finished so "
-                    f"far.")
+                    f"found by bisection to {STEP_M_S:g} m/s between --lowest-speed "
+                    f"(default {LOWEST_SPEED_M_S:g} m/s) and the car's top speed ({TOP:g} "
+                    f"m/s); reported as a distribution. A track failed at the lowest speed "
+                    f"has no limit (null, below_min_speed). Ctrl-C keeps the tracks "
+                    f"finished so far.")
     li.add_argument("--agent", choices=["pid", "ppo"], default="pid", help=AGENT_HELP)
     li.add_argument("--policy", type=Path, help="PPO policy .zip (default: the committed one)")
     add_trust_policy_option(li)
@@ -634,6 +635,13 @@ def _limits_parser(sub: Any) -> None:
                     help=f"held-out seeds A:B (default: {TEST_SEEDS[0]}:{TEST_SEEDS[1]})")
     li.add_argument("--laps", type=bounded_int_arg(1, 1000), default=2,
                     help="laps each drive must complete without leaving the road, 1–1000 "
+                         "(default: %(default)s)")
+    li.add_argument("--lowest-speed", type=bounded_float_arg(MIN_CRUISE_SPEED_M_S, TOP - 0.1,
+                                                             "m/s"),
+                    default=LOWEST_SPEED_M_S, metavar="V",
+                    help=f"the lowest speed tried, in [{MIN_CRUISE_SPEED_M_S:g}, "
+                         f"{TOP - 0.1:g}] m/s: a track failed there has no limit; raise it "
+                         "for an agent that fails slow drives it passes faster "
                          "(default: %(default)s)")
     add_sweep_options(li, "tracks")
     add_camera_option(li)
@@ -680,10 +688,12 @@ def cmd_limits(args: argparse.Namespace) -> int:
     spec = SweepSpec(command="limits",
                      config={"agent": args.agent, "policy": policy,
                              "seeds": f"{args.seeds.start}:{args.seeds.stop}",
-                             "laps": args.laps, "camera": args.camera,
-                             "vehicle": args.vehicle, "timing": args.timing},
+                             "laps": args.laps, "lowest_speed": args.lowest_speed,
+                             "camera": args.camera, "vehicle": args.vehicle,
+                             "timing": args.timing},
                      jobs=limit_jobs(args.agent, policy, args.seeds, args.laps, args.camera,
-                                     args.trust_policy, args.vehicle, timing),
+                                     args.trust_policy, args.vehicle, timing,
+                                     args.lowest_speed),
                      total=jobs, fn=run_job, record=run_record, check=check_run_record)
     resume = read_results(args.results, spec) if args.resume else None
     backend = sweep_backend(args, jobs)
@@ -699,7 +709,7 @@ def cmd_limits(args: argparse.Namespace) -> int:
         with holding_stops():  # a second Ctrl-C must not lose the first one's results
             result = result_document(args.agent, policy, args.camera, args.vehicle,
                                      args.timing, args.laps, args.seeds, per_seed,
-                                     end.interrupted, end.worker_died)
+                                     end.interrupted, end.worker_died, args.lowest_speed)
             if args.out:
                 outs.path(args.out).write_text(json_text(result, indent=1), encoding="utf-8")
             if args.plot:

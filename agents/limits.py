@@ -26,14 +26,15 @@ import numpy as np
 
 from tfalda_sim.camera import load_camera
 from tfalda_sim.timing import Timing, resolve_timing
-from tfalda_sim.tracks import generate
+from tfalda_sim.tracks import generate, seed_name
 from tfalda_sim.vehicle import MAX_SPEED_M_S
 
 from .drive import drive, make_agent
 
 LOWEST_SPEED_M_S: float = 0.5
-"""The lowest speed tried [m/s]: a limit below it is reported as such, not sought (the
-car crawls there; below it no lane keeper is of interest)."""
+"""The lowest speed tried by default [m/s] (``--lowest-speed``): a limit below it is
+reported as such, not sought (the car crawls there; below it no lane keeper is of
+interest)."""
 
 STEP_M_S: float = 0.1
 """The bisection's resolution [m/s]: a limit is a multiple of it above the lowest speed."""
@@ -95,16 +96,16 @@ def bisect_limit(passes: Callable[[float], Mapping[str, Any]],
     return outcome(grid[lo])
 
 
-Job = tuple[str, str | None, int, int, str, bool, str, Timing]
-"""(agent, policy, seed, laps, camera, trust the policy's pickles, vehicle, timing): one
-track's bisection."""
+Job = tuple[str, str | None, int, int, str, bool, str, Timing, float]
+"""(agent, policy, seed, laps, camera, trust the policy's pickles, vehicle, timing, lowest
+speed): one track's bisection."""
 
 
 def run_job(job: Job) -> dict[str, Any]:
     """One track's limit: the picklable top-level function every backend runs; its
     result is its JSON record. The timing travels read (a worker on another host need
     not have its file)."""
-    kind, policy, seed, laps, camera_spec, trust, vehicle, timing = job
+    kind, policy, seed, laps, camera_spec, trust, vehicle, timing, lowest = job
     track = generate(seed).with_elements(obstacles=())  # lane keeping: no cartons to avoid
     camera = load_camera(camera_spec)
     agent = make_agent(kind, policy, camera, trust_policy=trust)
@@ -113,23 +114,25 @@ def run_job(job: Job) -> dict[str, Any]:
         # A new env per drive: a drive depends on its track, speed and seeds only, never on
         # the drives before it (same seed, same limit).
         result = drive(agent, track, laps=laps, speed_m_s=speed, recover=False,
-                       label=f"seed {seed}", camera=camera, vehicle=vehicle, timing=timing)
+                       label=seed_name(seed), camera=camera, vehicle=vehicle, timing=timing)
         if result.ended == "interrupted":  # drive() stops at Ctrl-C; the sweep must too
             raise KeyboardInterrupt
         return {"success": result.laps_completed == laps, "ended": result.ended,
                 "laps_completed": result.laps_completed,
                 "distance_m": round(result.distance_m, 3)}
 
-    return {"seed": seed, **bisect_limit(passes)}
+    return {"seed": seed, **bisect_limit(passes, speed_grid(lowest))}
 
 
 def limit_jobs(kind: str, policy: str | None, seeds: range, laps: int, camera: str,
                trust_policy: bool = False, vehicle: str = "kinematic",
-               timing: str | Timing = "ideal") -> Iterator[Job]:
+               timing: str | Timing = "ideal", lowest_speed_m_s: float = LOWEST_SPEED_M_S
+               ) -> Iterator[Job]:
     """One job per seed, generated as needed."""
     resolved = resolve_timing(timing)
     for seed in seeds:
-        yield kind, policy, seed, laps, camera, trust_policy, vehicle, resolved
+        yield (kind, policy, seed, laps, camera, trust_policy, vehicle, resolved,
+               lowest_speed_m_s)
 
 
 def run_record(job: Job, result: dict[str, Any]) -> dict[str, Any]:
@@ -186,22 +189,28 @@ def _quantile(values: Sequence[float], q: float) -> float | None:
 
 def result_document(kind: str, policy: str | None, camera: str, vehicle: str, timing: str,
                     laps: int, seeds: range, per_seed: list[dict[str, Any]],
-                    interrupted: bool, worker_died: str | None) -> dict[str, Any]:
+                    interrupted: bool, worker_died: str | None,
+                    lowest_speed_m_s: float = LOWEST_SPEED_M_S) -> dict[str, Any]:
     """The limits' result: the search's set-up, the summary and every track's limit."""
     return {"agent": kind, "policy": policy, "camera": camera, "vehicle": vehicle,
             "timing": timing, "laps": laps, "seeds": [seeds.start, seeds.stop],
-            "lowest_speed_m_s": LOWEST_SPEED_M_S, "top_speed_m_s": TOP_SPEED_M_S,
+            "lowest_speed_m_s": lowest_speed_m_s, "top_speed_m_s": TOP_SPEED_M_S,
             "step_m_s": STEP_M_S, "summary": summarise(per_seed), "per_seed": per_seed,
             "interrupted": interrupted, "worker_died": worker_died}
 
 
-def show_limit(limit: float | None) -> str:
+def show_limit(limit: float | None, lowest: float = LOWEST_SPEED_M_S) -> str:
     """A limit in the table: "<0.5" below the lowest speed."""
-    return f"<{LOWEST_SPEED_M_S:g}" if limit is None else f"{limit:.1f}"
+    return f"<{lowest:g}" if limit is None else f"{limit:.1f}"
 
 
 def table(doc: Mapping[str, Any]) -> str:
     """The limits as a table: one line per track, then the distribution."""
+    lowest = doc["lowest_speed_m_s"]
+
+    def show(limit: float | None) -> str:
+        return show_limit(limit, lowest)
+
     lines = [f"{doc['agent']} ({doc['vehicle']} car, {doc['timing']} timing): speed limit "
              f"for {doc['laps']} lap{'s' if doc['laps'] != 1 else ''} without a departure, "
              f"seeds {doc['seeds'][0]}:{doc['seeds'][1]}",
@@ -209,13 +218,13 @@ def table(doc: Mapping[str, Any]) -> str:
     for r in doc["per_seed"]:
         note = " (top speed)" if r["at_top_speed"] else (
             " (failed at the lowest speed)" if r["below_min_speed"] else "")
-        lines.append(f"{r['seed']:>8}  {show_limit(r['limit_m_s']):>11}  "
+        lines.append(f"{r['seed']:>8}  {show(r['limit_m_s']):>11}  "
                      f"{len(r['drives']):>6}{note}")
     s = doc["summary"]
-    lines.append(f"{s['count']} tracks: min {show_limit(s['min_m_s'])}, q1 "
-                 f"{show_limit(s['q1_m_s'])}, median {show_limit(s['median_m_s'])}, q3 "
-                 f"{show_limit(s['q3_m_s'])}, max {show_limit(s['max_m_s'])} m/s; "
-                 f"{s['below_min_speed']} below {LOWEST_SPEED_M_S:g} m/s, "
+    lines.append(f"{s['count']} tracks: min {show(s['min_m_s'])}, q1 "
+                 f"{show(s['q1_m_s'])}, median {show(s['median_m_s'])}, q3 "
+                 f"{show(s['q3_m_s'])}, max {show(s['max_m_s'])} m/s; "
+                 f"{s['below_min_speed']} below {lowest:g} m/s, "
                  f"{s['at_top_speed']} at the top speed")
     return "\n".join(lines)
 
@@ -232,18 +241,19 @@ def plot(doc: Mapping[str, Any], path: Path) -> None:
     limits = [r["limit_m_s"] for r in doc["per_seed"] if r["limit_m_s"] is not None]
     below = doc["summary"]["below_min_speed"]
     width = 5 * STEP_M_S
-    edges = np.arange(LOWEST_SPEED_M_S, TOP_SPEED_M_S + width, width)
+    lowest = doc["lowest_speed_m_s"]
+    edges = np.arange(lowest, TOP_SPEED_M_S + width, width)
     edges[-1] = max(edges[-1], TOP_SPEED_M_S + 1e-6)  # the top speed falls in the last bin
     fig, ax = plt.subplots(figsize=(8.0, 4.0))
     ax.hist(limits, bins=edges, color="tab:blue", edgecolor="white",
             label="tracks by speed limit")
     if below:
-        ax.bar(LOWEST_SPEED_M_S - width / 2, below, width, color="tab:red", edgecolor="white",
-               label=f"failed at {LOWEST_SPEED_M_S:g} m/s")
+        ax.bar(lowest - width / 2, below, width, color="tab:red", edgecolor="white",
+               label=f"failed at {lowest:g} m/s")
     median = doc["summary"]["median_m_s"]
     if median is not None:
         ax.axvline(median, color="black", linestyle="--", label=f"median {median:.1f} m/s")
-    ax.set_xlim(LOWEST_SPEED_M_S - width, TOP_SPEED_M_S + width)
+    ax.set_xlim(lowest - width, TOP_SPEED_M_S + width)
     ax.set_xlabel("speed limit [m/s]")
     ax.set_ylabel("tracks")
     ax.yaxis.set_major_locator(MaxNLocator(integer=True))

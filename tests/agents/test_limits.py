@@ -84,7 +84,7 @@ def test_a_real_bisection_is_deterministic_and_consistent_with_its_drives() -> N
     twice alike."""
     from tfalda_sim.timing import TIMINGS
 
-    job = ("pid", None, 1, 1, "thesis", False, "dynamic", TIMINGS["ideal"])
+    job = ("pid", None, 1, 1, "thesis", False, "dynamic", TIMINGS["ideal"], 0.5)
     first = limits.run_job(job)
     assert first["limit_m_s"] is not None and 0.5 < first["limit_m_s"] < 8.3
     passed = [d["speed_m_s"] for d in first["drives"] if d["success"]]
@@ -137,6 +137,7 @@ def test_ctrl_c_keeps_the_tracks_finished(tmp_path: Path, monkeypatch: pytest.Mo
 
 @pytest.mark.parametrize("argv, message", [
     (["--seeds", "5:5"], "argument --seeds: seeds A:B needs B > A, got '5:5'"),
+    (["--lowest-speed", "8.3"], "argument --lowest-speed: expected a number in [0.05, 8.2] m/s"),
     (["--seeds", "5"], "argument --seeds: seeds must read A:B"),
     (["--laps", "0"], "argument --laps: expected an integer from 1 to 1000, got '0'"),
     (["--agent", "mpc"], "argument --agent: invalid choice: 'mpc'"),
@@ -172,3 +173,15 @@ def test_every_option_has_help_with_its_default() -> None:
         assert action.help and action.help != argparse.SUPPRESS, f"limits {name}: no help"
         if action.default not in (None, False):
             assert "default" in action.help, f"limits {name}: default not shown"
+
+
+def test_a_raised_lowest_speed_starts_the_bisection_there(tmp_path: Path) -> None:
+    """Seed 0: the PID leaves the road in slow drives (the LIS's fault counter runs out
+    per frame) but passes from 1 m/s on; from --lowest-speed 1 it has a limit."""
+    doc = tfalda("limits", "--seeds", "0:1", "--laps", "1", "--workers", "1",
+                 "--lowest-speed", "1", "--json", cwd=tmp_path).json()
+    assert doc["lowest_speed_m_s"] == 1.0
+    (track,) = doc["per_seed"]
+    assert track["drives"][0]["speed_m_s"] == 1.0
+    assert track["limit_m_s"] is not None and track["limit_m_s"] >= 1.0
+    assert limits.speed_grid(1.0)[:2] == [1.0, 1.1] and limits.speed_grid(1.0)[-1] == 8.3
