@@ -19,7 +19,7 @@ import numpy as np
 from tfalda_sim.camera import load_camera
 from tfalda_sim.parallel import stream
 from tfalda_sim.timing import Timing, resolve_timing
-from tfalda_sim.tracks import generate
+from tfalda_sim.tracks import generate, seed_name
 
 from .drive import check_agent, drive, make_agent
 
@@ -36,7 +36,7 @@ def run_job(job: Job) -> dict[str, Any]:
     camera = load_camera(camera_spec)
     agent = make_agent(kind, policy, camera, trust_policy=trust)
     result = drive(agent, track, laps=laps, speed_m_s=speed, recover=False,
-                   label=f"seed {seed}", camera=camera, vehicle=vehicle, timing=timing)
+                   label=seed_name(seed), camera=camera, vehicle=vehicle, timing=timing)
     if result.ended == "interrupted":  # drive() stops at Ctrl-C; the sweep must stop too
         raise KeyboardInterrupt
     return {"seed": seed, "speed_m_s": speed, "success": result.laps_completed == laps,

@@ -32,7 +32,14 @@ from tfalda_sim.rendering import DomainRandomization, Effects, Renderer, Scene, 
 from tfalda_sim.rendering.overlay import draw_observation
 from tfalda_sim.rendering.topdown import TopDownMap
 from tfalda_sim.timing import Timing, resolve_timing
-from tfalda_sim.tracks import NAMED_TRACKS, GeneratorParams, Track, generate, load_named
+from tfalda_sim.tracks import (
+    NAMED_TRACKS,
+    GeneratorParams,
+    Track,
+    generate,
+    load_named,
+    seed_name,
+)
 from tfalda_sim.vehicle import MIN_CRUISE_SPEED_M_S, CarParams
 from tfalda_sim.world import TrackPosition, World
 
@@ -447,7 +454,9 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
                      else resolve_track(spec, self.obstacles))
         if opts.start is not None:
             self._check_start(track, opts.start)
-        self._track_label = spec if isinstance(spec, str | int) else "custom"
+        # info["track"]: the name, the seed, or a given track's own name (a generated
+        # track's is its seed's label, seed-N).
+        self._track_label = spec if isinstance(spec, str | int) else (track.name or "custom")
         faults = opts.faults
         randomize = opts.domain_randomization
         speed = opts.speed_m_s
@@ -878,7 +887,9 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             raise RuntimeError("call reset() before render()")
         frame = self._full_frame()  # draw_observation copies it
         pos = self._position
-        text = (f"{self._track_label}  lap {self._laps()}  e_y {pos.cross_track_m:+.3f} m  "
+        label = (seed_name(self._track_label) if isinstance(self._track_label, int)
+                 else self._track_label)
+        text = (f"{label}  lap {self._laps()}  e_y {pos.cross_track_m:+.3f} m  "
                 f"v {self._world.speed_m_s:.2f} m/s")
         out = draw_observation(frame, self._last.lanes, text=text)
         if self._map is None:

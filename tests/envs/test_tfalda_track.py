@@ -143,7 +143,7 @@ def test_reset_options_place_the_car(oval_env: TfaldaTrackEnv) -> None:
     assert info["heading_error_rad"] == pytest.approx(0.05, abs=1e-9)
     assert info["speed_m_s"] == 2.5
     _, info = oval_env.reset(options={"track": load_named("thesis")})
-    assert info["track"] == "custom"
+    assert info["track"] == "thesis"  # a given track is labelled with its own name
 
 
 def centre_steering(env: TfaldaTrackEnv) -> np.ndarray:
@@ -480,3 +480,13 @@ def test_a_reset_takes_the_envs_car_as_it_is_now() -> None:
     env.car = replace(env.car, max_steer_rad=0.5 * env.car.max_steer_rad)
     env.reset(seed=2)
     assert env._world is not world and env._world.car is env.car
+
+
+def test_a_generated_track_given_as_a_track_is_labelled_by_its_seed() -> None:
+    """drive passes the Track itself: its label (info, the video overlay) is seed-N, the
+    one spelling every output uses."""
+    from tfalda_sim.tracks import generate
+
+    env = TfaldaTrackEnv(track=generate(7))
+    _, info = env.reset(seed=0)
+    assert info["track"] == "seed-7"

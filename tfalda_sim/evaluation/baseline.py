@@ -42,6 +42,7 @@ from ..perception import DetectorConfig, HoughConfig, HoughDetector, LaneObserva
 from ..perception.hough import SIMULATOR_BINARISE_LEVEL
 from ..perception.params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX, INITIAL_ROIS, is_thesis_camera
 from ..rendering import FrameTruth, Renderer
+from ..tracks import seed_name
 from .metrics import (
     EPSILON_PX,
     LANE_FAILURE_HIT_RATE,
@@ -296,8 +297,9 @@ def run_job(job: CompareJob) -> tuple[str, dict[str, Tally]]:
 
 
 def job_name(job: CompareJob) -> str:
-    """The scenario's name in compare.jsonl: the thesis scenario or ``seed N``."""
-    return job[0] if job[1] is None else f"seed {job[1]}"
+    """The scenario's name in compare.jsonl: the thesis scenario or ``seed-N``
+    (``tracks.seed_name``, as every output labels a generated track)."""
+    return job[0] if job[1] is None else seed_name(job[1])
 
 
 def run_record(job: CompareJob, result: tuple[str, Mapping[str, Tally]]) -> dict[str, Any]:
