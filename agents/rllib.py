@@ -206,10 +206,11 @@ def _keeping_stop_handlers() -> Iterator[None]:
 
 
 def _ray_error(address: str | None, exc: BaseException) -> RllibUnavailable:
-    where = f"the Ray cluster at {address}" if address else "a local Ray"
-    first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-    return RllibUnavailable(f"could not {'connect to' if address else 'start'} {where}: "
-                            f"{first}")
+    """The sweeps' one line for a failed ``ray.init`` (Ray's own advice names flags we do
+    not have)."""
+    from tfalda_sim.parallel import ray_init_failure
+
+    return RllibUnavailable(ray_init_failure(address, exc))
 
 
 @contextlib.contextmanager

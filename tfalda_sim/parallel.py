@@ -321,7 +321,7 @@ def _call(fn: Callable[[J], R], job: J) -> R:
     return fn(job)
 
 
-def _init_failure(address: str | None, exc: BaseException) -> str:
+def ray_init_failure(address: str | None, exc: BaseException) -> str:
     """One line for a ``ray.init`` that failed: Ray's first sentence (the rest is advice
     for Ray's own command line: its ``--address`` flag, ``RAY_ADDRESS``), then ours."""
     text = str(exc).strip()
@@ -360,7 +360,7 @@ def _start_ray(ray: Any, workers: int | None, address: str | None) -> bool:
     except (ConnectionError, RuntimeError, ValueError, TimeoutError) as exc:
         with contextlib.suppress(Exception):
             ray.shutdown()  # a half-made connection
-        raise RayUnavailable(_init_failure(address, exc)) from None
+        raise RayUnavailable(ray_init_failure(address, exc)) from None
     finally:
         for sig, handler in saved.items():
             if handler is not None:

@@ -210,6 +210,8 @@ def test_no_ray_cluster_at_the_address_is_a_clear_error(
     code, _, err = run(capsys, "train", "--backend", "rllib", "--ray-address", "auto",
                        "--out", str(tmp_path / "run"))
     assert code == 2 and "could not connect to the Ray cluster at auto" in err, err
+    # Our fix, not Ray's advice about flags this command does not have.
+    assert "ray start --head" in err and "--address" not in err, err
     assert not ray.is_initialized() and not (tmp_path / "run").exists()
 
 
