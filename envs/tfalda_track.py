@@ -31,7 +31,7 @@ from tfalda_sim.perception.rois import initial_rois, windows
 from tfalda_sim.rendering import DomainRandomization, Effects, Renderer, Scene, build_scene
 from tfalda_sim.rendering.overlay import draw_observation
 from tfalda_sim.rendering.topdown import TopDownMap
-from tfalda_sim.timing import Timing, resolve_timing
+from tfalda_sim.timing import Timing, TimingRandomization, resolve_timing
 from tfalda_sim.tracks import (
     NAMED_TRACKS,
     GeneratorParams,
@@ -183,6 +183,9 @@ def resolve_detector(spec: object) -> DetectorConfig:
                     f"({names}) or None, got {show(spec)}")
 
 
+IDEAL_TIMING = Timing()
+"""No latency, drop, jitter or noise: the observation of a step is that step's."""
+
 _TIMING_STREAM = 0x7157
 """Second word of the timing generator's seed (beside the episode's noise seed): a
 stream of its own."""
@@ -310,8 +313,9 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
     ``DynamicsParams``. ``timing``: the pipeline's timing and the steering servo,
     ``"ideal"`` (the default: the observation of a step comes from that step's frame, a
     command acts at once), ``"real-car"`` (the thesis' car: frames two periods old, a
-    servo's lag, dead band and command delay), a JSON file or a
-    ``tfalda_sim.timing.Timing``.
+    servo's lag, dead band and command delay), ``"randomized"`` (a timing drawn per
+    episode, for training), a JSON file, a ``tfalda_sim.timing.Timing`` or a
+    ``TimingRandomization``.
     ``reward``: ``RewardWeights``. ``max_laps``: an int ≥ 0, 0 =
     no limit (floats are refused, even 2.0). ``faults``: a default fault schedule for
     every episode, a list or tuple of ``tfalda_sim.faults`` faults.
@@ -371,7 +375,9 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         self.max_laps = check_int("max_laps", max_laps)
         self.dynamics = resolve_vehicle(vehicle)
         self.timing = resolve_timing(timing)
-        self.episode_timing = self.timing  # this episode's (drawn with randomisation)
+        # This episode's timing (drawn per episode from a TimingRandomization).
+        self.episode_timing = (self.timing if isinstance(self.timing, Timing)
+                               else IDEAL_TIMING)
         if self.dynamics is not None:
             self.dynamics.vector(self.car.wheelbase_m)  # its CoG between the car's axles
         self.randomization = check_optional(
@@ -500,11 +506,13 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         pose = self._start_pose(track, start, rng)
         # This episode's timing (drawn with domain randomisation) and its generator,
         # seeded from this episode's draw: an ideal timing draws nothing.
-        timing_ranges = self.randomization.timing if randomize else None
+        timing_ranges = (self.timing if isinstance(self.timing, TimingRandomization) else
+                         self.randomization.timing if randomize else None)
+        base = self.timing if isinstance(self.timing, Timing) else IDEAL_TIMING
         self._timing_rng = (
-            None if self.timing.ideal and timing_ranges is None else
+            None if base.ideal and timing_ranges is None else
             np.random.default_rng([self._noise_seed, _TIMING_STREAM]))
-        self.episode_timing = (self.timing if timing_ranges is None else
+        self.episode_timing = (base if timing_ranges is None else
                                timing_ranges.sample(self._timing_rng))
         self._world.servo = self.episode_timing.servo
         self._world.actuator_latency_s = self.episode_timing.actuator_latency_s

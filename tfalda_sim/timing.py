@@ -106,14 +106,6 @@ class Timing:
                 and self.steer_noise_rad == 0.0)
 
 
-TIMINGS: dict[str, Timing] = {
-    "ideal": Timing(),
-    "real-car": Timing(camera_latency_s=REAL_CAMERA_LATENCY_S,
-                       actuator_latency_s=REAL_ACTUATOR_LATENCY_S,
-                       jitter_s=REAL_JITTER_S, servo=REAL_SERVO),
-}
-"""Named timings: ``"ideal"`` (none) and ``"real-car"`` (the thesis' car; no frame drops:
-its prototype kept up, 70 frames/s processed against 50 taken)."""
 
 _KEYS = tuple(f.name for f in fields(Timing) if f.name != "servo")
 _SERVO_KEYS = tuple(f.name for f in fields(ServoParams))
@@ -146,9 +138,10 @@ def load_timing(path: str | os.PathLike[str]) -> Timing:
         raise ValueError(f"timing file {path}: {exc}") from None
 
 
-def resolve_timing(spec: object) -> Timing:
-    """A ``Timing``, a name of ``TIMINGS`` or a JSON file's path."""
-    if isinstance(spec, Timing):
+def resolve_timing(spec: object) -> Timing | TimingRandomization:
+    """A ``Timing``, a ``TimingRandomization`` (a timing drawn per episode), a name of
+    ``TIMINGS`` or a JSON file's path."""
+    if isinstance(spec, Timing | TimingRandomization):
         return spec
     if isinstance(spec, str) and spec in TIMINGS:
         return TIMINGS[spec]
@@ -186,3 +179,15 @@ class TimingRandomization:
         servo = ServoParams(lag_s=v.pop("servo_lag_s"),
                             dead_band_rad=v.pop("servo_dead_band_rad"))
         return Timing(**v, servo=servo)
+
+
+TIMINGS: dict[str, Timing | TimingRandomization] = {
+    "ideal": Timing(),
+    "real-car": Timing(camera_latency_s=REAL_CAMERA_LATENCY_S,
+                       actuator_latency_s=REAL_ACTUATOR_LATENCY_S,
+                       jitter_s=REAL_JITTER_S, servo=REAL_SERVO),
+    "randomized": TimingRandomization(),
+}
+"""Named timings: ``"ideal"`` (none), ``"real-car"`` (the thesis' car; no frame drops: its
+prototype kept up, 70 frames/s processed against 50 taken) and ``"randomized"`` (a timing
+drawn per episode from ``TimingRandomization``'s ranges: for training)."""

@@ -27,7 +27,8 @@ BAD = {
                         "argument --vehicle: invalid choice: 'bike' (choose from 'kinematic', "
                         "'dynamic')"),
     "unknown timing": (["--timing", "slow"],
-                       "argument --timing: unknown timing 'slow'; use ideal, real-car or a "
+                       "argument --timing: unknown timing 'slow'; use ideal, real-car, randomized "
+                       "or a "
                        ".json timing file"),
     "missing file": (["--timing", "none.json"],
                      "argument --timing: timing file none.json: No such file or directory"),

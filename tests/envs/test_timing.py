@@ -143,3 +143,16 @@ def test_domain_randomization_draws_a_timing_per_episode_by_seed() -> None:
     assert env.episode_timing is TIMINGS["real-car"]
     with pytest.raises(ValueError, match="camera_latency_s must be a range"):
         TimingRandomization(camera_latency_s=(0.05, 0.01))
+
+
+def test_a_randomized_timing_is_drawn_per_episode_without_domain_randomization() -> None:
+    env = TfaldaTrackEnv(timing="randomized")
+    env.reset(seed=1)
+    first = env.episode_timing
+    env.reset()
+    assert env.episode_timing != first and isinstance(first, Timing)
+    again = TfaldaTrackEnv(timing="randomized")
+    again.reset(seed=1)
+    assert again.episode_timing == first
+    # The photometric effects stay the env's: only the timing is drawn.
+    assert env.domain_randomization is False
