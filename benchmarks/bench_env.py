@@ -77,6 +77,8 @@ CEILING_2_OWN_PACE = "2 processes at once, each at its own pace"
 SCALING_CEILING = "2 processes at once / 1 (the machine's ceiling)"
 OWN_PACE_CEILING = "2 processes, each at its own pace / 1"
 GENERATED_FIXED = "generated / fixed track (lanes)"
+DYNAMIC_REAL_CAR = "lanes, fixed track (oval), dynamic car, real-car timing"
+DYNAMIC_COST = "step cost: dynamic car + real-car timing / kinematic car (lanes, fixed)"
 GENERATED_FIXED_NO_RESETS = "generated / fixed track (lanes), resets off the clock"
 WARMUP_STEPS = 6000
 """Steps each of our envs (a single env, or a stream of a vector configuration or of the
@@ -449,6 +451,10 @@ def run(steps: int, quiet: bool, warmup: int = WARMUP_STEPS) -> dict[str, Any]:
             lambda mode=mode: gym.make("TfaldaTrack-v0", observation=mode, track="oval"))
         singles[f"{mode}, new generated track per reset"] = (
             lambda mode=mode: gym.make("TfaldaTrack-v0", observation=mode))
+    # The real car: the dynamic single-track model and the real-car timing (latency,
+    # jitter, servo), on the same fixed track.
+    singles[DYNAMIC_REAL_CAR] = lambda: gym.make("TfaldaTrack-v0", track="oval",
+                                                 vehicle="dynamic", timing="real-car")
     # The reference steps in the same rounds as the envs divided by it (≈ 10× slower a
     # step: fewer steps, the same minutes).
     reference_steps = min(steps, REFERENCE_STEPS)
@@ -496,6 +502,9 @@ def run(steps: int, quiet: bool, warmup: int = WARMUP_STEPS) -> dict[str, Any]:
         scaling[OWN_PACE_CEILING] = (pair["own_pace_steps_per_s"]
                                      / alone["own_pace_steps_per_s"])
     fixed = results.get("lanes, fixed track (oval)")
+    real_car = results.get(DYNAMIC_REAL_CAR)
+    if isinstance(fixed, dict) and isinstance(real_car, dict):  # cost of a step, not rate
+        scaling[DYNAMIC_COST] = fixed["steps_per_s"] / real_car["steps_per_s"]
     generated = results.get("lanes, new generated track per reset")
     if isinstance(fixed, dict) and isinstance(generated, dict):
         scaling[GENERATED_FIXED] = generated["steps_per_s"] / fixed["steps_per_s"]
