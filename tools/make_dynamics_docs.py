@@ -52,7 +52,8 @@ def main(argv: list[str] | None = None) -> int:
     fig, ax = plt.subplots(figsize=(9, 0.55 * len(found) + 1.5))
     data = [[r["limit_m_s"] for r in doc["per_seed"] if r["limit_m_s"] is not None]
             for _, doc in found]
-    ax.boxplot(data, vert=False, labels=[label for label, _ in found], whis=(0, 100))
+    ax.boxplot(data, orientation="horizontal", tick_labels=[label for label, _ in found],
+               whis=(0, 100))
     for y, values in enumerate(data, start=1):
         ax.scatter(values, [y] * len(values), s=6, alpha=0.4, color="tab:blue")
     ax.set_xlabel("speed limit: highest cruise speed completing the laps [m/s]")
