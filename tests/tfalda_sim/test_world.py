@@ -70,13 +70,17 @@ def test_driving_into_a_carton_is_a_collision_and_the_free_lane_is_not() -> None
     assert hits == [True, False]
 
 
-def test_a_fast_car_does_not_tunnel_through_a_carton() -> None:
+@pytest.mark.parametrize("dynamic", [False, True])
+def test_a_fast_car_does_not_tunnel_through_a_carton(dynamic: bool) -> None:
+    """Also the dynamic car: a collision with a carton stays an episode end."""
+    from tfalda_sim.dynamics import DynamicsParams
+
     track = generated(3)
     ob = track.obstacles[0]
     lateral = (-1.0 if ob.lane.value == "right" else 1.0) * 0.5 * track.lane_width_m
     x, y, _h = lane_start(track, ob.s_m - 0.5, lateral)
     tx, ty, _ = lane_start(track, ob.s_m, lateral)
-    world = World(track)
+    world = World(track, dynamics=DynamicsParams() if dynamic else None)
     world.reset((x, y, math.atan2(ty - y, tx - x)), speed_m_s=world.car.max_speed_m_s)
     assert any(world.step(0.0) for _ in range(10))
     # The car's body is tested after every physics step, each shorter than a carton.
