@@ -542,23 +542,17 @@ def _evaluate_agent_parser(sub: Any) -> None:
     ev.set_defaults(func=cmd_evaluate_agent)
 
 
-def cmd_evaluate_agent(args: argparse.Namespace) -> int:
-    from tfalda_sim.outputs import Outputs
-    from tfalda_sim.sweep_runner import SweepSpec, read_results, resume_hint, run_sweep
-
+def _check_agent_sweep(args: argparse.Namespace, suffixes: dict[str, str]
+                       ) -> tuple[Any, str | None]:
+    """What an agent sweep (evaluate-agent, limits) checks before any work: its sweep
+    options, its outputs (``suffixes`` by option name), the camera, the timing and the
+    agent; returns the timing read and the policy's path (None: the committed one)."""
     from .drive import check_agent
-    from .evaluate import (
-        check_run_record,
-        evaluation_jobs,
-        result_document,
-        run_job,
-        run_record,
-    )
 
     check_sweep_options(args)
     # --resume replaces the report of the run it continues (and its --results file).
-    check_outputs({"out": args.out, "results": args.results},
-                  {"out": ".json", "results": ".jsonl"}, args.force or args.resume,
+    check_outputs({name: getattr(args, name) for name in suffixes}, suffixes,
+                  args.force or args.resume,
                   inputs={"policy": args.policy, "camera": camera_input(args.camera),
                           "timing": timing_input(args.timing)})
     camera = check_camera_geometry(args.camera)
@@ -567,8 +561,23 @@ def cmd_evaluate_agent(args: argparse.Namespace) -> int:
         check_agent(args.agent, args.policy, camera, trust_policy=args.trust_policy)
     except (ValueError, FileNotFoundError, ImportError) as exc:
         raise CliError(str(exc)) from None
+    return timing, None if args.policy is None else str(args.policy)
+
+
+def cmd_evaluate_agent(args: argparse.Namespace) -> int:
+    from tfalda_sim.outputs import Outputs
+    from tfalda_sim.sweep_runner import SweepSpec, read_results, resume_hint, run_sweep
+
+    from .evaluate import (
+        check_run_record,
+        evaluation_jobs,
+        result_document,
+        run_job,
+        run_record,
+    )
+
+    timing, policy = _check_agent_sweep(args, {"out": ".json", "results": ".jsonl"})
     jobs = len(args.seeds) * len(args.speeds)
-    policy = None if args.policy is None else str(args.policy)
     spec = SweepSpec(command="evaluate-agent",
                      config={"agent": args.agent, "policy": policy,
                              "seeds": f"{args.seeds.start}:{args.seeds.stop}",
@@ -659,7 +668,6 @@ def cmd_limits(args: argparse.Namespace) -> int:
     from tfalda_sim.outputs import Outputs
     from tfalda_sim.sweep_runner import SweepSpec, read_results, resume_hint, run_sweep
 
-    from .drive import check_agent
     from .limits import (
         check_run_record,
         limit_jobs,
@@ -670,21 +678,9 @@ def cmd_limits(args: argparse.Namespace) -> int:
         table,
     )
 
-    check_sweep_options(args)
-    # --resume replaces the report of the run it continues (and its --results file).
-    check_outputs({"out": args.out, "plot": args.plot, "results": args.results},
-                  {"out": ".json", "plot": ".png", "results": ".jsonl"},
-                  args.force or args.resume,
-                  inputs={"policy": args.policy, "camera": camera_input(args.camera),
-                          "timing": timing_input(args.timing)})
-    camera = check_camera_geometry(args.camera)
-    timing = resolve_timing_arg(args.timing)
-    try:
-        check_agent(args.agent, args.policy, camera, trust_policy=args.trust_policy)
-    except (ValueError, FileNotFoundError, ImportError) as exc:
-        raise CliError(str(exc)) from None
+    timing, policy = _check_agent_sweep(
+        args, {"out": ".json", "plot": ".png", "results": ".jsonl"})
     jobs = len(args.seeds)
-    policy = None if args.policy is None else str(args.policy)
     spec = SweepSpec(command="limits",
                      config={"agent": args.agent, "policy": policy,
                              "seeds": f"{args.seeds.start}:{args.seeds.stop}",
