@@ -112,12 +112,19 @@ def test_bench_env_reports_every_configuration_against_car_racing() -> None:
             "lanes, fixed track (oval)", "lanes, new generated track per reset",
             "1 process alone, lanes, generated",
             "2 processes at once, lanes, generated",
-            "2 processes at once, each at its own pace"} <= set(envs)
+            "2 processes at once, each at its own pace",
+            "lanes, fixed track (oval), dynamic car, real-car timing"} <= set(envs)
+    dynamic_cost = "step cost: dynamic car + real-car timing / kinematic car (lanes, fixed)"
     assert set(result["ratios"]) == {"make_vec 2 envs / 1 env",
                                      "2 processes at once / 1 (the machine's ceiling)",
                                      "2 processes, each at its own pace / 1",
                                      "generated / fixed track (lanes)",
-                                     "generated / fixed track (lanes), resets off the clock"}
+                                     "generated / fixed track (lanes), resets off the clock",
+                                     dynamic_cost}
+    # The real car's step cost is the kinematic car's rate over its own (same run).
+    assert result["ratios"][dynamic_cost] == pytest.approx(
+        envs["lanes, fixed track (oval)"]["steps_per_s"]
+        / envs["lanes, fixed track (oval), dynamic car, real-car timing"]["steps_per_s"])
     # A single env's resets are clocked apart: a part of its time, so its steps alone
     # are faster than its steps with resets; the ratio without them is theirs.
     for name in ("lanes, fixed track (oval)", "lanes, new generated track per reset"):

@@ -67,7 +67,7 @@ def _renderer_cache_is_cold() -> bool:
 
 
 @contextlib.contextmanager
-def _note_first_compile(command: str) -> Iterator[None]:
+def _note_first_compile(command: str | None) -> Iterator[None]:
     """One line on stderr when a rendering command starts compiling on a cold cache: without
     it the first run is silent for a minute. Said at the first compile, not before the
     command (a bad argument then fails at once, without it), and once: the sweep workers
@@ -205,7 +205,7 @@ def _run(argv: Sequence[str] | None) -> int:
             args = parser.parse_args(argv)
         except SystemExit as exc:  # argparse has printed the usage and the error
             return exc.code if isinstance(exc.code, int) else EXIT_BAD_INPUT
-        with _note_first_compile(args.command):
+        with _note_first_compile(getattr(args, "command", None)):
             code = int(args.func(args))
         sys.stdout.flush()  # a closed pipe shows here, inside the handling below
         if held_stop() is not None and code in (EXIT_OK, EXIT_NEGATIVE):
