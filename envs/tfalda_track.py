@@ -31,7 +31,7 @@ from tfalda_sim.perception.rois import initial_rois, windows
 from tfalda_sim.rendering import DomainRandomization, Effects, Renderer, Scene, build_scene
 from tfalda_sim.rendering.overlay import draw_observation
 from tfalda_sim.rendering.topdown import TopDownMap
-from tfalda_sim.timing import Timing, TimingRandomization, resolve_timing
+from tfalda_sim.timing import IDEAL_TIMING, Timing, TimingRandomization, resolve_timing
 from tfalda_sim.tracks import (
     NAMED_TRACKS,
     GeneratorParams,
@@ -182,9 +182,6 @@ def resolve_detector(spec: object) -> DetectorConfig:
     raise TypeError(f"detector must be a tfalda_sim.perception.DetectorConfig, a preset name "
                     f"({names}) or None, got {show(spec)}")
 
-
-IDEAL_TIMING = Timing()
-"""No latency, drop, jitter or noise: the observation of a step is that step's."""
 
 _TIMING_STREAM = 0x7157
 """Second word of the timing generator's seed (beside the episode's noise seed): a

@@ -181,8 +181,11 @@ class TimingRandomization:
         return Timing(**v, servo=servo)
 
 
+IDEAL_TIMING = Timing()
+"""No latency, drop, jitter or noise: the observation of a step is that step's."""
+
 TIMINGS: dict[str, Timing | TimingRandomization] = {
-    "ideal": Timing(),
+    "ideal": IDEAL_TIMING,
     "real-car": Timing(camera_latency_s=REAL_CAMERA_LATENCY_S,
                        actuator_latency_s=REAL_ACTUATOR_LATENCY_S,
                        jitter_s=REAL_JITTER_S, servo=REAL_SERVO),
