@@ -128,14 +128,17 @@ def env_config(speed_m_s: float = TRAIN_SPEED_M_S, track: str | int | None = Non
 def ppo_config(env_cfg: dict[str, Any], cfg: RllibConfig, seed: int) -> Any:
     """RLlib's ``PPOConfig`` (current API stack) for ``env_cfg``: ``PpoConfig``'s
     hyper-parameters, CPU only, a 64-64 MLP; an env runner that fails is an error, not
-    restarted (a broken env would otherwise sample nothing, silently, forever)."""
+    restarted (a broken env would otherwise sample nothing, silently, forever); no
+    sampling time-out: RLlib's default (60 s) ends a slow sample early with no steps, and
+    an env runner's first sample (kernels compiled or loaded from the cache, on a busy
+    host) can take longer, leaving an iteration that trained on nothing."""
     from ray.rllib.algorithms.ppo import PPOConfig
 
     p = cfg.ppo
     return (PPOConfig()
             .environment(ENV_NAME, env_config=env_cfg)
             .env_runners(num_env_runners=cfg.env_runners, num_envs_per_env_runner=1,
-                         num_cpus_per_env_runner=1)
+                         num_cpus_per_env_runner=1, sample_timeout_s=None)
             .learners(num_learners=0, num_gpus_per_learner=0)
             .training(train_batch_size_per_learner=cfg.train_batch,
                       minibatch_size=min(p.batch_size, cfg.train_batch), num_epochs=p.n_epochs,
