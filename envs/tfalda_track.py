@@ -117,7 +117,7 @@ class RewardWeights:
 
 
 @dataclass
-class _Frame:
+class ObservedFrame:
     """What one step saw: the detector's lanes, the camera pose [m, m, rad] and step the
     frame was rendered at, and its full image (None in "lanes" mode until ``render`` or
     ``camera_frame`` renders it — the same pixels, from the same noise seed)."""
@@ -414,7 +414,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         self._map: TopDownMap | None = None
         self._world: World | None = None
         self._track: Track | None = None
-        self._last: _Frame | None = None
+        self._last: ObservedFrame | None = None
         self._detector: TfaldaDetector | None = None
         self._prepared: tuple[int, Track] | None = None  # prepare_reset's (seed, track)
         self._prepared_for: dict | None = None  # … for this state of np_random
@@ -525,7 +525,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         self._last, self._position = frame, position
         # The pipeline's results in flight (arrival time [s], observation, frame) and the
         # one the agent sees.
-        self._in_flight: deque[tuple[float, Any, _Frame]] = deque()
+        self._in_flight: deque[tuple[float, Any, ObservedFrame]] = deque()
         self._delivered = (obs, frame)
         return obs, self._info(frame, position)
 
@@ -721,7 +721,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         return self._faults.world(self._step_count, world)
 
     def _deliver(self, camera_pose: tuple[float, float, float]
-                 ) -> tuple[np.ndarray | dict[str, np.ndarray], _Frame]:
+                 ) -> tuple[np.ndarray | dict[str, np.ndarray], ObservedFrame]:
         """The observation the agent gets at this step (``timing``): this step's frame
         (ideal timing), or the newest result that has arrived — frames take
         ``camera_latency_s`` plus up to ``jitter_s`` through the pipeline, in the order
@@ -755,7 +755,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         return obs.copy(), frame
 
     def _observe(self, camera_pose: tuple[float, float, float]
-                 ) -> tuple[np.ndarray | dict[str, np.ndarray], _Frame]:
+                 ) -> tuple[np.ndarray | dict[str, np.ndarray], ObservedFrame]:
         """Camera pose → renderer (the ROIs only in "lanes" mode) → image faults →
         TFALDA + LIS → the observation, and the frame's record."""
         world = self._world
@@ -776,7 +776,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
                                          frame_seed=frame_seed)
             self._faults.image(step, [image], [(0, 0, image.shape[1], image.shape[0])])
             lanes = det.process(image)
-        frame = _Frame(lanes=lanes, camera_pose=camera_pose, step=step, image=image)
+        frame = ObservedFrame(lanes=lanes, camera_pose=camera_pose, step=step, image=image)
         speed, steer = world.speed_m_s, world.steer_rad
         timing = self.episode_timing
         if timing.speed_noise_m_s > 0.0 or timing.steer_noise_rad > 0.0:
@@ -837,7 +837,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             return 0
         return max(0, math.floor(self._distance_m / track.length_m))
 
-    def _info(self, frame: _Frame, pos: TrackPosition, new_frame: bool = True
+    def _info(self, frame: ObservedFrame, pos: TrackPosition, new_frame: bool = True
               ) -> dict[str, Any]:
         world = self._world
         assert world is not None
@@ -861,6 +861,32 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
             "detector_hit_rate": float(hits.sum()) / len(hits) if len(hits) else math.nan,
             "track": self._track_label,
         }
+
+    # ------------------------------------------------------------------ what was seen
+    @property
+    def last_frame(self) -> ObservedFrame:
+        """The frame of the last observation: the detector's lanes, its camera pose and
+        the step it was taken at (with timing, an older step's; a frame that stays the
+        newest arrived keeps its step), for recordings and diagnostics; the image with
+        ``camera_frame``."""
+        if self._world is None or self._last is None:
+            raise RuntimeError("call reset() before last_frame")
+        return self._last
+
+    @property
+    def car_pose(self) -> tuple[float, float, float]:
+        """The car's pose now: x [m], y [m], yaw [rad] in the track's frame."""
+        if self._world is None:
+            raise RuntimeError("call reset() before car_pose")
+        return self._world.pose
+
+    def top_view(self) -> np.ndarray:
+        """The top-down map with the car where it is now, BGR uint8 (the render's inset)."""
+        if self._world is None:
+            raise RuntimeError("call reset() before top_view()")
+        if self._map is None:
+            self._map = TopDownMap.of(self._world.track, 180, self.car)
+        return self._map.draw(self._world.pose)
 
     # ------------------------------------------------------------------ render
     def camera_frame(self) -> np.ndarray:
@@ -897,9 +923,7 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         text = (f"{label}  lap {self._laps()}  e_y {pos.cross_track_m:+.3f} m  "
                 f"v {self._world.speed_m_s:.2f} m/s")
         out = draw_observation(frame, self._last.lanes, text=text)
-        if self._map is None:
-            self._map = TopDownMap.of(self._world.track, 180, self.car)
-        inset = self._map.draw(self._world.pose)
+        inset = self.top_view()
         # Top right, over the walls: the ROIs and lanes stay visible.
         h, w = inset.shape[:2]
         x0 = out.shape[1] - w - 8

@@ -490,3 +490,34 @@ def test_a_generated_track_given_as_a_track_is_labelled_by_its_seed() -> None:
     env = TfaldaTrackEnv(track=generate(7))
     _, info = env.reset(seed=0)
     assert info["track"] == "seed-7"
+
+
+def test_the_last_frame_car_pose_and_top_view_are_what_the_step_saw() -> None:
+    """What recordings read: the observed frame's lanes are what a detector makes of the
+    camera frames in order, its step lags with a late pipeline, the pose is the car's,
+    the map shows it."""
+    from tfalda_sim.perception import TfaldaDetector
+
+    env = TfaldaTrackEnv(track="oval")
+    with pytest.raises(RuntimeError, match="reset"):
+        _ = env.last_frame
+    env.reset(seed=0)
+    again = TfaldaDetector(env.detector_config)
+    again.process(env.camera_frame())
+    for _ in range(3):
+        env.step(np.zeros(1, np.float32))
+        obs = again.process(env.camera_frame())
+    frame = env.last_frame
+    assert frame.step == 3
+    np.testing.assert_array_equal(frame.lanes.lanes, obs.lanes)
+    x, y, yaw = env.car_pose
+    assert (x, y, yaw) == env._world.pose and np.isfinite([x, y, yaw]).all()
+    view = env.top_view()
+    assert view.ndim == 3 and view.shape[2] == 3 and view.dtype == np.uint8
+    env.step(np.zeros(1, np.float32))
+    assert not np.array_equal(view, env.top_view())  # the car moved on the map
+    late = TfaldaTrackEnv(track="oval", timing="real-car")
+    late.reset(seed=0)
+    for _ in range(6):
+        late.step(np.zeros(1, np.float32))
+    assert late.last_frame.step < 6  # the newest result arrived is an older frame's
