@@ -14,15 +14,18 @@ from typing import Any
 from tfalda_sim.camera.command import add_camera_option, camera_input
 from tfalda_sim.cli_common import (
     DIRECTORY,
+    RECORDING_SUFFIXES,
     CliError,
     add_force_option,
     add_json_option,
+    add_recording_options,
     bounded_float_arg,
     bounded_int_arg,
     check_outputs,
     interrupted,
     json_text,
     positive_int_arg,
+    recording_outputs,
     seed_arg,
     seed_range_arg,
     speed_arg_for,
@@ -149,6 +152,7 @@ def _drive_parser(sub: Any) -> None:
     dr.add_argument("--camera-video", type=Path,
                     help="MP4 of the bare grey camera frames, for tfalda-sim replay "
                          "(default: none)")
+    add_recording_options(dr, "the drive")
     add_camera_option(dr)
     add_vehicle_options(dr)
     add_force_option(dr, "existing videos")
@@ -166,8 +170,9 @@ def cmd_drive(args: argparse.Namespace) -> int:
 
     from .drive import PolicyFileError, drive, make_agent
 
-    check_outputs({"video": args.video, "camera-video": args.camera_video},
-                  {"video": ".mp4", "camera-video": ".mp4"}, args.force,
+    check_outputs({"video": args.video, "camera-video": args.camera_video,
+                   **recording_outputs(args)},
+                  {"video": ".mp4", "camera-video": ".mp4", **RECORDING_SUFFIXES}, args.force,
                   inputs={"policy": args.policy, "camera": camera_input(args.camera),
                           "track": track_file_arg(args.track),
                           "timing": timing_input(args.timing)})
@@ -187,7 +192,7 @@ def cmd_drive(args: argparse.Namespace) -> int:
                        recover=not args.no_recover, video=args.video,
                        camera_video=args.camera_video, label=label,
                        progress=not args.json, camera=camera, vehicle=args.vehicle,
-                       timing=timing)
+                       timing=timing, mcap=args.mcap, rosbag=args.rosbag)
     except CameraGeometryError as exc:
         raise CliError(f"--camera {args.camera}: {exc}") from None
     except PolicyFileError as exc:
@@ -202,6 +207,9 @@ def cmd_drive(args: argparse.Namespace) -> int:
         summary["video"] = str(args.video)
     if args.camera_video:
         summary["camera_video"] = str(args.camera_video)
+    recording = args.mcap or args.rosbag
+    if recording and result.steps:
+        summary["recording"] = str(recording)
     if args.json:
         print(json_text(summary))
     else:
@@ -215,11 +223,11 @@ def cmd_drive(args: argparse.Namespace) -> int:
         print(f"  mean |cross-track error| {mean_cm}, max {max_cm}")
         print(f"  departures {result.departures}, LIS resets {result.roi_resets}, mean hit "
               f"rate {_figure(result.mean_hit_rate, '.3f')}")
-        for path in (args.video, args.camera_video):
+        for path in (args.video, args.camera_video, recording):
             if path:
                 print(f"  wrote {path}")
     if result.ended == "interrupted":
-        kept = " and ".join(str(p) for p in (args.video, args.camera_video) if p)
+        kept = " and ".join(str(p) for p in (args.video, args.camera_video, recording) if p)
         return interrupted(f"drove {result.laps_completed} of {args.laps} laps "
                            f"({result.steps} frames)"
                            + (f"; kept {kept} up to that frame" if kept else ""))

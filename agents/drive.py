@@ -29,6 +29,7 @@ from tfalda_sim.video import VideoWriter
 
 from .pid import LanePid
 from .policy_file import PolicyFileError, load_policy
+from .record import RunRecorder, open_recorder
 from .train import distribution_checks_off
 
 
@@ -156,13 +157,16 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
           max_steps: int | None = None,
           label: str = "", progress: bool = False, env: TfaldaTrackEnv | None = None,
           camera: Camera | str = "thesis", vehicle: str | DynamicsParams = "kinematic",
-          timing: str | Path | Timing = "ideal") -> DriveResult:
+          timing: str | Path | Timing = "ideal", mcap: Path | None = None,
+          rosbag: Path | None = None) -> DriveResult:
     """Drive ``laps`` laps of ``track`` from its start line at ``speed_m_s``. ``video``
     records the visualiser (lanes, ROIs, map), ``camera_video`` the bare grey camera
     frames (for ``tfalda-sim replay``). A Ctrl-C ends the drive early (``ended ==
     "interrupted"``) and keeps the videos of the frames driven so far. ``camera``: the
     car's camera (a profile name, file or camera), ``vehicle`` its model and ``timing``
-    its pipeline's timing (the env's arguments) when no ``env`` is given."""
+    its pipeline's timing (the env's arguments) when no ``env`` is given. ``mcap`` /
+    ``rosbag``: the drive as an MCAP file or a ROS 2 bag (``record.py``: every frame the
+    detector processed, its lanes and LIS state, pose, speed, ground truth, the map)."""
     if laps < 1:
         raise ValueError(f"laps must be ≥ 1, got {laps}")
     if not track.closed:
@@ -192,6 +196,10 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
     t0 = time.perf_counter()
     # The writers replace an existing file only when the drive ends without an error.
     with contextlib.ExitStack() as stack:
+        recorder = open_recorder(mcap, rosbag, env, label or track.name or "drive")
+        run_rec = RunRecorder(stack.enter_context(recorder)) if recorder else None
+        if run_rec is not None:
+            run_rec.step(env, info)  # the start's frame: the detector's first
         writer = stack.enter_context(VideoWriter(video, rate_hz)) if video else None
         camera_writer = (stack.enter_context(VideoWriter(camera_video, rate_hz))
                          if camera_video else None)
@@ -205,6 +213,8 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
                     writer.write(env.render()[..., ::-1])
                 if camera_writer is not None:
                     camera_writer.write(env.camera_frame())
+                if run_rec is not None:
+                    run_rec.step(env, info)
                 abs_error_sum += abs(info["cross_track_m"])
                 max_abs_error = max(max_abs_error, abs(info["cross_track_m"]))
                 hit_sum += info["detector_hit_rate"]

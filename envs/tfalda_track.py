@@ -874,6 +874,13 @@ class TfaldaTrackEnv(gym.Env[np.ndarray | dict[str, np.ndarray], np.ndarray]):
         return self._last
 
     @property
+    def track(self) -> Track:
+        """The episode's track."""
+        if self._world is None:
+            raise RuntimeError("call reset() before track")
+        return self._world.track
+
+    @property
     def car_pose(self) -> tuple[float, float, float]:
         """The car's pose now: x [m], y [m], yaw [rad] in the track's frame."""
         if self._world is None:

@@ -190,6 +190,27 @@ def add_json_option(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object")
 
 
+def add_recording_options(parser: argparse.ArgumentParser, what: str = "the run") -> None:
+    """``--mcap FILE`` / ``--rosbag DIR``: ``what`` as a recording Foxglove shows and
+    ``tfalda-sim replay`` reads (docs/recordings.md)."""
+    rec = parser.add_mutually_exclusive_group()
+    rec.add_argument("--mcap", type=Path, metavar="FILE.mcap",
+                     help=f"record {what} as an MCAP file: camera frames, lanes, ROIs, LIS "
+                          "state and more, each on its own channel (Foxglove shows them)")
+    rec.add_argument("--rosbag", type=Path, metavar="DIR",
+                     help=f"record {what} as a ROS 2 bag folder (MCAP storage), the same "
+                          "channels as --mcap")
+
+
+RECORDING_SUFFIXES: dict[str, str] = {"mcap": ".mcap", "rosbag": DIRECTORY}
+"""``check_outputs``' suffixes of the recording options."""
+
+
+def recording_outputs(args: argparse.Namespace) -> dict[str, Path | None]:
+    """``check_outputs``' paths of the recording options."""
+    return {"mcap": args.mcap, "rosbag": args.rosbag}
+
+
 def add_force_option(parser: argparse.ArgumentParser,
                      what: str = "existing output files") -> None:
     """``--force``: outputs that exist are replaced (refused without it)."""

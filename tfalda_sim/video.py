@@ -373,7 +373,7 @@ class VideoReader:
                 fps=float(cap.get(cv2.CAP_PROP_FPS) or 0.0),
                 frame_count=max(0, int(cap.get(cv2.CAP_PROP_FRAME_COUNT))), codec=codec,
                 colour=first.ndim == 3 and first.shape[2] in (3, 4)
-                and not _is_grey(first))
+                and not is_grey(first))
         finally:
             cap.release()
         self.passes_completed = 0
@@ -441,7 +441,7 @@ GREY_TOLERANCE_DN: int = 3
 as BGR (lossy codecs leave a little chroma noise), not a colour one."""
 
 
-def _is_grey(frame: np.ndarray) -> bool:
+def is_grey(frame: np.ndarray) -> bool:
     """The frame's channels are equal within ``GREY_TOLERANCE_DN``."""
     c = frame[..., :3].astype(np.int16)
     return bool(np.abs(c - c[..., :1]).max() <= GREY_TOLERANCE_DN)

@@ -226,10 +226,10 @@ def test_replay_cli_json_and_bad_options(video: Path, tmp_path: Path, capsys) ->
     out = json.loads(capsys.readouterr().out)
     assert out["frames"] == 2 * FRAMES and out["hough_preset"] == "simulator"
     assert main(["replay", str(tmp_path / "none.mp4"), "--detector", "tfalda"]) == 2
-    assert "no video file" in capsys.readouterr().err
+    assert "none.mp4: no such file or folder" in capsys.readouterr().err
     assert main(["replay", str(video), "--detector", "hough", "--out", str(video),
                  "--force"]) == 2
-    assert "is the --video input" in capsys.readouterr().err
+    assert "is the --source input" in capsys.readouterr().err
     existing = tmp_path / "old.mp4"
     existing.write_bytes(b"keep me")
     assert main(["replay", str(video), "--detector", "hough", "--out", str(existing)]) == 2

@@ -84,11 +84,16 @@ def _evaluate_parser(sub: Any) -> None:
                     "finishes, and Ctrl-C keeps the tracks finished so far.")
     ev.add_argument("--scenario", choices=[k.value for k in ScenarioKind],
                     help="the thesis' straight/curve/track drive, or generated tracks")
-    ev.add_argument("--frames", type=Path,
-                    help="instead of a scenario: a folder of real frames (a sequence, in name "
-                         "order), scored against --labels; see docs/cameras.md")
+    ev.add_argument("--frames", type=Path, metavar="SOURCE",
+                    help="instead of a scenario: real frames scored against --labels — a "
+                         "folder of frames (a sequence, in name order), or a recording (a "
+                         "video, a ROS 1/2 bag, an MCAP file); see docs/recordings.md")
+    ev.add_argument("--topic",
+                    help="with --frames RECORDING: its image topic (default: its only one)")
     ev.add_argument("--labels", type=Path,
-                    help="with --frames: the folder of their <frame>.labels.json files")
+                    help="with --frames: the folder of their labels, <frame>.labels.json "
+                         "(a folder's frames) or frame-<i>.labels.json (a recording's frame "
+                         "i, counted from 0)")
     ev.add_argument("--detector", choices=["tfalda", "hough", "both"], default=None,
                     help="with --frames: which detectors to score (default tfalda)")
     ev.add_argument("--repeat", type=bounded_int_arg(1, 1000), default=None,
@@ -144,7 +149,7 @@ def _configs(args: argparse.Namespace) -> dict[str, DetectorConfig]:
 
 _SCENARIO_ONLY = ("seeds", "max_frames", "workers", "plot", "xml", "jsonl", "video",
                   "ray_address", "results", "resume")
-_FRAMES_ONLY = ("labels", "detector", "repeat", "stills")
+_FRAMES_ONLY = ("labels", "detector", "repeat", "stills", "topic")
 
 
 def _check_frames(args: argparse.Namespace) -> None:
@@ -255,13 +260,32 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def _evaluate_frames(args: argparse.Namespace) -> int:
     """``evaluate --frames DIR --labels DIR``: the detectors on labelled real frames."""
     from ..perception.hough import REAL_FRAME_BINARISE_LEVEL, HoughConfig
-    from .frames import FramesError, frame_files, score_frames
+    from ..sources import SourceError, open_source
+    from .frames import (
+        FramesError,
+        folder_frames,
+        frame_files,
+        recording_labels,
+        score_frames,
+        source_frames,
+    )
 
     _check_frames(args)
     camera = check_camera_geometry(args.camera)
+    folder = args.frames.is_dir() and not (args.frames / "metadata.yaml").exists()
+    if folder and args.topic is not None:
+        args.parser.error("--topic picks a recording's image topic; --frames is a folder of "
+                          "frames: drop --topic")
     try:
-        pairs = frame_files(args.frames, args.labels)
-    except FramesError as exc:
+        if folder:
+            pairs = frame_files(args.frames, args.labels)
+            frames, count = folder_frames(pairs, camera), len(pairs)
+        else:
+            source = open_source(args.frames, topic=args.topic)
+            labels = recording_labels(args.labels, str(args.frames))
+            frames = source_frames(source, labels, camera, stills=args.stills)
+            count = len(labels)
+    except (FramesError, SourceError) as exc:
         raise CliError(str(exc)) from None
     which = args.detector or "tfalda"
     tfalda: dict[str, DetectorConfig] = {}
@@ -273,10 +297,10 @@ def _evaluate_frames(args: argparse.Namespace) -> int:
     hough = ({"Hough (real frames)": HoughConfig.for_camera(camera, REAL_FRAME_BINARISE_LEVEL)}
              if which in ("hough", "both") else {})
     try:
-        results = score_frames(pairs, camera, tfalda=tfalda, hough=hough,
+        results = score_frames(frames, camera, tfalda=tfalda, hough=hough,
                                repeat=args.repeat or 1, stills=args.stills,
                                epsilon_px=args.epsilon_px)
-    except FramesError as exc:
+    except (FramesError, SourceError) as exc:
         raise CliError(str(exc)) from None
     out = {"frames": str(args.frames), "labels": str(args.labels), "camera": args.camera,
            "repeat": args.repeat or 1, "stills": args.stills, "epsilon_px": args.epsilon_px,
@@ -284,7 +308,7 @@ def _evaluate_frames(args: argparse.Namespace) -> int:
     if args.json:
         print(json_text(out))
         return 0
-    print(f"{len(pairs)} labelled {'stills' if args.stills else 'frames'} in {args.frames}, "
+    print(f"{count} labelled {'stills' if args.stills else 'frames'} in {args.frames}, "
           f"camera {args.camera}, each frame {args.repeat or 1}× (on a marking: ≥ 80 % of a "
           f"line's pixels within {args.epsilon_px:g} px of one)")
     for r in results:

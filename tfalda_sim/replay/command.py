@@ -12,12 +12,14 @@ from ..cli_common import (
     CliError,
     add_force_option,
     add_json_option,
+    bounded_float_arg,
     check_outputs,
     json_text,
     positive_int_arg,
 )
 from ..fileio import WriteError
 from ..perception.command import check_camera_geometry
+from ..sources import FrameRange, SourceError
 from ..video import VideoError
 from .loop import OUT_BYTES_PER_FRAME, Detector, HoughPreset, replay
 
@@ -29,12 +31,17 @@ _GROWTH = (f"≈ {OUT_BYTES_PER_FRAME[0] / 1000:g}–{OUT_BYTES_PER_FRAME[1] / 1
 def register(sub: Any) -> None:
     """Add ``replay`` to the ``tfalda-sim`` subparsers."""
     rp = sub.add_parser(
-        "replay", help="replay a recorded video in a loop through a lane detector",
-        description="Read VIDEO in an endless loop (the second seed's set-up), run the Hough "
+        "replay", help="replay a recording (video, images, ROS bag, MCAP) through a lane "
+                       "detector",
+        description="Read SOURCE in an endless loop (the second seed's set-up), run the Hough "
                     "baseline or TFALDA + LIS on every frame, report frames/s and detections. "
-                    "Colour and other frame sizes are converted to the camera's grey "
-                    "752×480. Ctrl-C stops cleanly.")
-    rp.add_argument("video", type=Path, help="the recording (e.g. from tfalda-sim drive --video)")
+                    "SOURCE: a video file, an image folder or glob (natural order), a ROS 1 "
+                    ".bag, a ROS 2 bag folder (sqlite3 or MCAP storage) or an MCAP file. "
+                    "Colour and other frame sizes are converted to the camera's grey size. "
+                    "Ctrl-C stops cleanly. See docs/recordings.md.")
+    rp.add_argument("source", type=Path,
+                    help="the recording (e.g. from tfalda-sim drive --camera-video or --mcap)")
+    add_source_options(rp)
     rp.add_argument("--detector", choices=[d.value for d in Detector], required=True,
                     help="the lane detector")
     times = rp.add_mutually_exclusive_group()
@@ -52,6 +59,9 @@ def register(sub: Any) -> None:
                          "seed's 0.9 threshold finds no rendered marking) or real (a real "
                          "camera's frames, binarised at 0.6)")
     rp.add_argument("--out", type=Path, help="annotated MP4 (segments or ROIs and lanes)")
+    rp.add_argument("--per-frame", type=Path, metavar="F.jsonl",
+                    help="one JSON line a frame: frame, loop, t_s, and lanes, accepted, "
+                         "fault_counter, roi_reset, state (tfalda) or segments (hough)")
     rp.add_argument("--stages", action="store_true",
                     help="hough: write the seed's 2×2 stage view to --out instead")
     add_camera_option(rp)
@@ -60,9 +70,31 @@ def register(sub: Any) -> None:
     rp.set_defaults(func=cmd_replay)
 
 
+def frame_range_arg(text: str) -> FrameRange:
+    """``--frames A:B``."""
+    try:
+        return FrameRange.parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_source_options(parser: argparse.ArgumentParser) -> None:
+    """``--topic``, ``--frames`` and ``--rate``: which frames of a recording to read."""
+    parser.add_argument("--topic", help="the image topic of a ROS bag or MCAP file (default: "
+                                        "its only image topic, or the one it names as its "
+                                        "camera)")
+    parser.add_argument("--frames", type=frame_range_arg, metavar="A:B",
+                        help="frames A to B−1 of the recording, counted from 0 (A: or :B "
+                             "too)")
+    parser.add_argument("--rate", type=bounded_float_arg(0.1, 1000.0, "1/s"), metavar="HZ",
+                        help="an image folder's frame rate [1/s] (its time stamps; default: "
+                             "from the file names, if they hold them)")
+
+
 def cmd_replay(args: argparse.Namespace) -> int:
-    check_outputs({"out": args.out}, {"out": ".mp4"}, args.force,
-                  inputs={"video": args.video, "camera": camera_input(args.camera)})
+    check_outputs({"out": args.out, "per-frame": args.per_frame},
+                  {"out": ".mp4", "per-frame": ".jsonl"}, args.force,
+                  inputs={"source": args.source, "camera": camera_input(args.camera)})
     camera = check_camera_geometry(args.camera)
     if args.hough_preset is not None and args.detector != Detector.HOUGH.value:
         raise CliError("--hough-preset sets the Hough baseline; it does nothing with "
@@ -75,13 +107,14 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(f"note: {args.out} grows {_GROWTH} until Ctrl-C; --max-frames N bounds it",
               file=sys.stderr)
     try:
-        result = replay(args.video, Detector(args.detector),
+        result = replay(args.source, Detector(args.detector),
                         loops=None if args.forever else (args.loops or 1), out=args.out,
                         hough=HoughPreset(args.hough_preset), stages=args.stages,
                         progress=sys.stderr.isatty() or not args.json, camera=camera,
-                        max_frames=args.max_frames)
+                        max_frames=args.max_frames, topic=args.topic, frames=args.frames,
+                        rate_hz=args.rate, per_frame=args.per_frame)
         result["camera"] = args.camera
-    except (FileNotFoundError, VideoError, WriteError) as exc:
+    except (FileNotFoundError, VideoError, SourceError, WriteError) as exc:
         raise CliError(str(exc)) from None
     except OSError as exc:
         raise CliError(f"cannot write {args.out}: {exc.strerror or exc}") from None
@@ -90,8 +123,12 @@ def cmd_replay(args: argparse.Namespace) -> int:
     if args.json:
         print(json_text(result))
         return code
-    print(f"{result['video']}: {result['frames']} frames, {result['loops_completed']} loops "
-          f"({result['stopped']}), {result['frames_per_s'] or 0:.0f} frames/s, detector "
+    topic = f" {result['topic']}" if result["topic"] else ""
+    recorded = (f"recorded at {result['recording_rate_hz']:.3g} frames/s"
+                if result["recording_rate_hz"] else "no recorded frame rate")
+    print(f"{result['source']} ({result['kind']}{topic}, {recorded}): {result['frames']} "
+          f"frames, {result['loops_completed']} loops ({result['stopped']}), processed at "
+          f"{result['frames_per_s'] or 0:.0f} frames/s, detector "
           f"{result['detector_ms_median'] or 0:.2f} ms/frame")
     what = "segments" if args.detector == Detector.HOUGH.value else "lanes"
     print(f"{args.detector}: {result['detections_per_frame'] or 0:.2f} {what}/frame, "
@@ -100,6 +137,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
              else ""))
     if result["conversions"]:
         print("converted: " + ", ".join(result["conversions"]))
-    if result["out"]:
-        print(f"wrote {result['out']}")
+    if result["rate_note"]:
+        print(f"note: {result['rate_note']}")
+    for key in ("out", "per_frame"):
+        if result[key]:
+            print(f"wrote {result[key]}")
     return code

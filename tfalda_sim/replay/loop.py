@@ -1,16 +1,20 @@
-"""Replay a recorded drive in an endless loop through a lane detector (the second seed's
+"""Replay a recording in an endless loop through a lane detector (the second seed's
 set-up: "Lesen Sie diesen als Endlosschleife ein").
 
-    tfalda-sim replay VIDEO --detector hough|tfalda [--loops N | --forever]
-                            [--max-frames N] [--out annotated.mp4 [--stages]] [--json]
+    tfalda-sim replay SOURCE --detector hough|tfalda [--topic T] [--frames A:B] [--rate HZ]
+                             [--loops N | --forever] [--max-frames N]
+                             [--out annotated.mp4 [--stages]] [--per-frame F.jsonl] [--json]
 
-The video is read frame by frame (``video.VideoReader``: colour → grey, other sizes
-resized to the camera's 752×480), each frame goes through the detector, and after the last
-frame the file is read again from its start — ``--loops`` times, or until Ctrl-C with
-``--forever``; ``--max-frames`` stops it after that many frames in either mode (and so
-bounds the annotated video, which grows ``OUT_BYTES_PER_FRAME`` a frame). A Ctrl-C ends
-the replay cleanly in either mode: the frames so far are counted, the annotated video so
-far is kept, the summary printed.
+SOURCE is anything ``sources.open_source`` reads (a video, an image folder or glob, a
+ROS 1 or ROS 2 bag, an MCAP file). Its frames are read one by one (colour → grey, other
+sizes resized to the camera's, ``sources.to_grey``), each goes through the detector, and
+after the last frame the recording is read again from its start — ``--loops`` times, or
+until Ctrl-C with ``--forever``; ``--max-frames`` stops it after that many frames in either
+mode (and so bounds the annotated video, which grows ``OUT_BYTES_PER_FRAME`` a frame). A
+Ctrl-C ends the replay cleanly in either mode: the frames so far are counted, the
+annotated video and the per-frame lines so far are kept, the summary printed. The
+recording's own frame rate (from its time stamps) is reported beside the processing
+rate, and said when it is not the camera profile's (``rate_note``).
 
 TFALDA + LIS keeps its state across the loop's seam (a recorded lap is a closed loop; the
 LIS resets if the seam does not fit); the Hough baseline has no state between frames.
@@ -20,6 +24,7 @@ The command exits 0 after ``--loops N``, ``--max-frames N`` or a Ctrl-C of ``--f
 
 from __future__ import annotations
 
+import contextlib
 import enum
 import math
 import time
@@ -30,18 +35,28 @@ import numpy as np
 from tqdm import tqdm
 
 from ..camera import Camera, load_camera
+from ..cli_common import json_text
+from ..fileio import atomic_write
 from ..histogram import TimeHistogram
 from ..interrupts import INTERRUPTS, holding_stops, is_interrupt
 from ..perception import (
     DetectorConfig,
     HoughConfig,
     HoughDetector,
+    LaneObservation,
     TfaldaDetector,
 )
-from ..perception.hough import BINARISE_LEVEL, REAL_FRAME_BINARISE_LEVEL, SIMULATOR_BINARISE_LEVEL
+from ..perception.hough import (
+    BINARISE_LEVEL,
+    REAL_FRAME_BINARISE_LEVEL,
+    SIMULATOR_BINARISE_LEVEL,
+    HoughResult,
+)
 from ..perception.params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX, is_thesis_camera
 from ..rendering.overlay import draw_hough, draw_observation, stage_view
-from ..video import VideoReader, VideoWriter
+from ..sources import FrameRange, SourceError, SourceInfo, open_source, to_grey
+from ..video import VideoWriter, is_grey
+from .per_frame import lanes_record, segments_record
 
 DEFAULT_FPS: float = 25.0
 """Frame rate of the annotated video when the recording declares none [1/s]."""
@@ -85,10 +100,10 @@ class HoughPreset(enum.Enum):
 def _frame_step(detector: Detector, hough: HoughDetector | None,
                 tfalda: TfaldaDetector | None, frame: np.ndarray,
                 annotate: bool, text: str, stages: bool = False
-                ) -> tuple[int, bool, np.ndarray | None, float]:
+                ) -> tuple[int, bool, np.ndarray | None, float, HoughResult | LaneObservation]:
     """Run the detector on one frame: (detections, LIS reset, annotated frame or None —
     with ``stages`` the Hough baseline's 2×2 stage view instead of the frame —, the
-    detector's own time [s], drawing not included)."""
+    detector's own time [s], drawing not included, the detector's result)."""
     t0 = time.perf_counter()
     if detector is Detector.HOUGH:
         assert hough is not None
@@ -98,7 +113,7 @@ def _frame_step(detector: Detector, hough: HoughDetector | None,
         picture = None
         if annotate:
             picture = stage_view(result) if stages else draw_hough(frame, result, text=text)
-        return len(segments), False, picture, dt
+        return len(segments), False, picture, dt, result
     assert tfalda is not None
     obs = tfalda.process(frame)
     dt = time.perf_counter() - t0
@@ -106,90 +121,157 @@ def _frame_step(detector: Detector, hough: HoughDetector | None,
     # last frame's.
     lanes = int((np.all(np.isfinite(obs.lanes), axis=1) & ~obs.replaced).sum())
     picture = draw_observation(frame, obs, text=text) if annotate else None
-    return lanes, bool(obs.roi_reset), picture, dt
+    return lanes, bool(obs.roi_reset), picture, dt, obs
+
+
+RATE_MISMATCH: float = 0.05
+"""A recording whose frame rate differs from the camera profile's by more than this share
+is said: the LIS's filters and the ROI rules count frames, not seconds [1]."""
+
+
+def _conversions(info: SourceInfo, first: np.ndarray, size: tuple[int, int]) -> list[str]:
+    """What turning the source's frames into the camera's grey ``size`` does, judged on
+    the first frame (as ``video.VideoReader`` does)."""
+    out: list[str] = []
+    if first.ndim == 3 and first.shape[2] in (3, 4) and not is_grey(first):
+        out.append("colour → grey")
+    h, w = first.shape[:2]
+    if (w, h) != size:
+        out.append(f"{w}×{h} → {size[0]}×{size[1]} px")
+        if abs(w / h - size[0] / size[1]) > 0.01:
+            out.append("aspect ratio changed")
+    return out
+
+
+def rate_note(recording_hz: float | None, camera_hz: float) -> str | None:
+    """The line saying that the recording's frame rate is not the camera profile's, or
+    None when they agree (within ``RATE_MISMATCH``) or the recording has none."""
+    if recording_hz is None or not math.isfinite(recording_hz) or recording_hz <= 0:
+        return None
+    if abs(recording_hz / camera_hz - 1.0) <= RATE_MISMATCH:
+        return None
+    return (f"the recording runs at {recording_hz:.3g} frames/s, the camera profile at "
+            f"{camera_hz:.3g}: the detectors count frames, so their filters act "
+            f"{recording_hz / camera_hz:.2f}× as fast in seconds (camera fit writes a "
+            "profile with the recording's rate)")
 
 
 def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
            out: Path | None = None, hough: HoughPreset = HoughPreset.SIMULATOR,
            stages: bool = False, progress: bool = False, camera: Camera | None = None,
-           max_frames: int | None = None) -> dict[str, Any]:
-    """Replay ``path`` ``loops`` times (``None``: until Ctrl-C) through ``detector``, or
-    until ``max_frames`` frames; the summary: frames, loops, frames/s, detector ms/frame,
-    detections, conversions, and how it stopped (``"loops"``, ``"max_frames"`` or
-    ``"interrupted"``). ``out`` gets the annotated frames,
-    or with ``stages`` (Hough only) the seed's 2×2 stage view of each frame. ``camera``
-    (default: the thesis'): frames are converted to its size and both detectors use the
-    geometry derived for it."""
+           max_frames: int | None = None, topic: str | None = None,
+           frames: FrameRange | None = None, rate_hz: float | None = None,
+           per_frame: Path | None = None) -> dict[str, Any]:
+    """Replay the recording ``path`` (anything ``sources.open_source`` reads: a video, an
+    image folder or glob, a ROS 1/2 bag, an MCAP file; ``topic``, ``frames`` and
+    ``rate_hz`` as there) ``loops`` times (``None``: until Ctrl-C) through ``detector``,
+    or until ``max_frames`` frames; the summary: frames, loops, the recording's and the
+    processing frame rate, detector ms/frame, detections, conversions, and how it stopped
+    (``"loops"``, ``"max_frames"`` or ``"interrupted"``). ``out`` gets the annotated
+    frames, or with ``stages`` (Hough only) the seed's 2×2 stage view of each frame;
+    ``per_frame`` a JSON line a frame (``per_frame.py``). ``camera`` (default: the
+    thesis'): frames are converted to its size and both detectors use the geometry derived
+    for it. Every output is written
+    in full or not at all; a Ctrl-C keeps the frames finished in each."""
     if stages and detector is not Detector.HOUGH:
         raise ValueError("stages is the Hough baseline's 2×2 view; use the hough detector")
     if max_frames is not None and max_frames < 1:
         raise ValueError(f"max_frames must be ≥ 1 or None, got {max_frames}")
+    if loops is not None and loops < 1:
+        raise ValueError(f"loops must be ≥ 1 or None (endless), got {loops}")
     size = (camera.width, camera.height) if camera is not None else (IMAGE_WIDTH_PX,
                                                                        IMAGE_HEIGHT_PX)
-    reader = VideoReader(path, size=size)
+    source = open_source(path, topic=topic, frames=frames, rate_hz=rate_hz)
+    info = source.info
     hough_det = HoughDetector(hough.config(camera)) if detector is Detector.HOUGH else None
     tfalda_cfg = DetectorConfig.thesis() if camera is None else \
         DetectorConfig.thesis().on_camera(camera)
     tfalda_det = TfaldaDetector(tfalda_cfg) if detector is Detector.TFALDA else None
-    fps = reader.info.fps if math.isfinite(reader.info.fps) and reader.info.fps > 0 else \
-        DEFAULT_FPS
-    per_loop = reader.info.frame_count or None
+    camera_hz = (camera or load_camera("thesis")).frame_rate_hz
+    fps = info.rate_hz if info.rate_hz and math.isfinite(info.rate_hz) and info.rate_hz > 0 \
+        else DEFAULT_FPS
+    per_loop = info.frame_count or None
     # Running sums and a time histogram: --forever runs for days in flat memory.
-    frames = detections = frames_without = resets = 0
+    n = detections = frames_without = resets = passes = 0
     times = TimeHistogram()
     stopped = "loops"
+    conversions: list[str] | None = None
     t_start = time.perf_counter()
     writer: VideoWriter | None = None
     bar = None
-    keep = False  # the annotated video replaces --out only after a clean stop
-    try:
-        if out is not None:
-            writer = VideoWriter(out, fps)
-        total = loops * per_loop if loops and per_loop else None
-        if max_frames is not None:
-            total = min(total or max_frames, max_frames)
-        bar = tqdm(total=total, unit="frame", desc=f"replay {detector.value}",
-                   disable=not progress)
-        for loop, frame in reader.loop(loops):
-            found, reset, picture, dt = _frame_step(
-                detector, hough_det, tfalda_det, frame, writer is not None,
-                f"loop {loop + 1} frame {frames + 1}", stages)
-            times.add(dt)
-            frames += 1
-            detections += found
-            frames_without += found == 0
-            resets += reset
-            if writer is not None and picture is not None:
-                writer.write(picture)
-            bar.update()
-            if max_frames is not None and frames >= max_frames:
-                stopped = "max_frames"
-                break
-        keep = True
-    except INTERRUPTS as exc:
-        if not is_interrupt(exc):
-            raise
-        stopped = "interrupted"
-        keep = True
-    finally:
-        with holding_stops():  # closing the video must not be cut by a second Ctrl-C
-            if bar is not None:
-                bar.close()
-            if writer is not None:
-                writer.close(keep=keep)
+    keep = False  # the outputs replace existing files only after a clean stop
+    with contextlib.ExitStack() as outputs:
+        try:
+            if out is not None:
+                writer = VideoWriter(out, fps)
+            lines = outputs.enter_context(atomic_write(per_frame)) if per_frame else None
+            total = loops * per_loop if loops and per_loop else None
+            if max_frames is not None:
+                total = min(total or max_frames, max_frames)
+            bar = tqdm(total=total, unit="frame", desc=f"replay {detector.value}",
+                       disable=not progress)
+            while loops is None or passes < loops:
+                empty = True
+                for item in source.frames():
+                    empty = False
+                    if conversions is None:
+                        conversions = _conversions(info, item.image, size)
+                    frame = to_grey(item.image, size)
+                    found, reset, picture, dt, result = _frame_step(
+                        detector, hough_det, tfalda_det, frame, writer is not None,
+                        f"loop {passes + 1} frame {item.index}", stages)
+                    times.add(dt)
+                    n += 1
+                    detections += found
+                    frames_without += found == 0
+                    resets += reset
+                    if writer is not None and picture is not None:
+                        writer.write(picture)
+                    if lines is not None:
+                        record_line = (lanes_record if detector is Detector.TFALDA
+                                       else segments_record)
+                        lines.write(json_text(record_line(item.index, passes, item.t_s,
+                                                          result)) + "\n")
+                    bar.update()
+                    if max_frames is not None and n >= max_frames:
+                        stopped = "max_frames"
+                        break
+                if stopped == "max_frames":
+                    break
+                if empty:
+                    raise SourceError(f"{path}: a pass over the recording gave no frame")
+                passes += 1
+            keep = True
+        except INTERRUPTS as exc:
+            if not is_interrupt(exc):
+                raise
+            stopped = "interrupted"
+            keep = True
+        finally:
+            with holding_stops():  # closing the outputs must not be cut by a second Ctrl-C
+                if bar is not None:
+                    bar.close()
+                if writer is not None:
+                    writer.close(keep=keep)
     wall = time.perf_counter() - t_start
+    notes = [*info.notes, *getattr(source, "notes", [])]
+    note = rate_note(info.rate_hz, camera_hz)
     return {
-        "video": str(path), "detector": detector.value,
+        "source": str(path), "kind": info.kind, "topic": info.topic,
+        "detector": detector.value,
         "hough_preset": hough.value if detector is Detector.HOUGH else None,
-        "codec": reader.info.codec, "source_size_px": [reader.info.width_px,
-                                                      reader.info.height_px],
-        "conversions": reader.conversions,
-        "frames": frames, "loops_completed": reader.passes_completed,
+        "source_size_px": [info.width_px, info.height_px],
+        "conversions": (conversions or []) + notes,
+        "frames": n, "loops_completed": passes,
         "stopped": stopped,
-        "frames_per_s": frames / wall if wall > 0 else None,
+        "recording_rate_hz": info.rate_hz,
+        "camera_rate_hz": camera_hz,
+        "rate_note": note,
+        "frames_per_s": n / wall if wall > 0 else None,
         "detector_ms_median": times.median_ms(),  # to 0.01 ms (binned)
-        "detections_per_frame": detections / frames if frames else None,
+        "detections_per_frame": detections / n if n else None,
         "frames_without_detection": frames_without,
         "roi_resets": resets if detector is Detector.TFALDA else None,
         "out": str(out) if writer is not None and writer.frames else None,
+        "per_frame": str(per_frame) if per_frame is not None else None,
     }
