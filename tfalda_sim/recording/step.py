@@ -17,6 +17,9 @@ LANE_COUNT = 4
 """Lanes (and regions of interest) per frame: TFALDA's four lane lines."""
 
 
+_KINDS = {"f": "float", "i": "int", "u": "unsigned int", "b": "bool"}
+
+
 def _check(name: str, value: np.ndarray | None, shape: tuple[int | None, ...],
            kinds: str) -> None:
     """``value`` is None or an array of ``shape`` (None: any length) whose dtype kind is
@@ -30,7 +33,8 @@ def _check(name: str, value: np.ndarray | None, shape: tuple[int | None, ...],
         want = "×".join("n" if s is None else str(s) for s in shape)
         raise ValueError(f"{name} must have the shape ({want}), got {value.shape}")
     if value.dtype.kind not in kinds:
-        raise ValueError(f"{name} must be of a {kinds!r} dtype kind, got {value.dtype}")
+        want = " or ".join(_KINDS[k] for k in kinds)
+        raise ValueError(f"{name} must hold {want} numbers, got {value.dtype}")
 
 
 @dataclass(frozen=True)
@@ -74,9 +78,9 @@ class RecordedStep:
         if not (isinstance(self.t_s, (int, float, np.floating, np.integer))
                 and math.isfinite(self.t_s) and self.t_s >= 0):
             raise ValueError(f"t_s must be a finite time ≥ 0 [s], got {self.t_s!r}")
-        _check("frame", self.frame, (None, None), "u")
-        if self.frame.dtype != np.uint8:
+        if isinstance(self.frame, np.ndarray) and self.frame.dtype != np.uint8:
             raise ValueError(f"frame must be uint8 grey, got {self.frame.dtype}")
+        _check("frame", self.frame, (None, None), "u")
         _check("lanes", self.lanes, (LANE_COUNT, 4), "fiu")
         _check("accepted", self.accepted, (LANE_COUNT,), "b")
         if self.accepted is not None and self.lanes is None:
@@ -84,9 +88,9 @@ class RecordedStep:
         _check("rois", self.rois, (LANE_COUNT, 4), "iu")
         _check("segments", self.segments, (None, 4), "fiu")
         _check("truth_lanes", self.truth_lanes, (None, 4), "fiu")
-        _check("top_view", self.top_view, (None, None, 3), "u")
-        if self.top_view is not None and self.top_view.dtype != np.uint8:
+        if isinstance(self.top_view, np.ndarray) and self.top_view.dtype != np.uint8:
             raise ValueError(f"top_view must be uint8 BGR, got {self.top_view.dtype}")
+        _check("top_view", self.top_view, (None, None, 3), "u")
         lis = (self.fault_counter, self.roi_reset, self.state)
         if any(v is None for v in lis) and any(v is not None for v in lis):
             raise ValueError("the LIS fields fault_counter, roi_reset and state come all "
