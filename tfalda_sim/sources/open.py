@@ -10,6 +10,8 @@ import cv2
 
 from tfalda_sim.sources.base import FrameRange, FrameSource, SourceError
 from tfalda_sim.sources.images import ImageSource, folder_images, glob_images
+from tfalda_sim.sources.mcap_file import McapSource
+from tfalda_sim.sources.ros import RosBagSource
 from tfalda_sim.sources.video import VideoSource, opens_as_video
 
 KINDS = ("a video file (mp4, avi, mkv, … — any OpenCV decodes), a folder of images or a "
@@ -94,14 +96,14 @@ def open_source(path: str | Path, *, topic: str | None = None,
 
 def _ros1(path: Path, *, topic: str | None, frames: FrameRange, rate_hz: float | None
           ) -> FrameSource:
-    raise SourceError(f"{path}: ROS 1 bags are not read yet")
+    return RosBagSource(path, ros1=True, topic=topic, frames=frames, rate_hz=rate_hz)
 
 
 def _ros2(path: Path, *, topic: str | None, frames: FrameRange, rate_hz: float | None
           ) -> FrameSource:
-    raise SourceError(f"{path}: ROS 2 bags are not read yet")
+    return RosBagSource(path, ros1=False, topic=topic, frames=frames, rate_hz=rate_hz)
 
 
 def _mcap(path: Path, *, topic: str | None, frames: FrameRange, rate_hz: float | None
           ) -> FrameSource:
-    raise SourceError(f"{path}: MCAP files are not read yet")
+    return McapSource(path, topic=topic, frames=frames, rate_hz=rate_hz)

@@ -21,6 +21,18 @@ from tfalda_sim.sources.base import FrameRange, SourceError, SourceFrame, Source
 Loader = Callable[[], tuple[float, np.ndarray]]
 """Decodes one frame: its time stamp from the source's first frame [s] and its image."""
 
+RATE_SAMPLE_FRAMES = 100
+"""Frames whose time stamps give a recording's frame rate (``median_rate_hz``): enough for
+a robust median, few enough that opening a long recording stays quick."""
+
+
+def reason(exc: BaseException) -> str:
+    """A library's exception as a short clause (its own advice to report it dropped)."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    for tail in ("; please report issue.", "; please report issue"):
+        text = text.removesuffix(tail)
+    return text.rstrip(".")[:300]
+
 
 def range_count(path: Path, total: int | None, frames: FrameRange) -> int | None:
     """The frames of ``frames`` in a source of ``total`` frames (None: unknown); a range
@@ -56,7 +68,8 @@ class StreamSource:
     def __init__(self, info: SourceInfo, frames: FrameRange) -> None:
         self.info = info
         self.range = frames
-        self.notes: list[str] = list(info.notes)
+        self.notes: list[str] = []
+        """Conversions noticed while reading (``info.notes`` has those known at opening)."""
         self._found: dict[str, None] = {}  # notes noticed while reading, in order, once each
         self._resized: Counter[tuple[int, int]] = Counter()
 
@@ -65,7 +78,10 @@ class StreamSource:
         raise NotImplementedError
 
     def note(self, text: str) -> None:
-        """Add a conversion noticed while reading to ``notes`` (once)."""
+        """Add a conversion noticed while reading to ``notes`` (once; a note of
+        ``info.notes`` is not repeated)."""
+        if text in self.info.notes:
+            return
         if text not in self._found:
             self._found[text] = None
             self._refresh()
@@ -75,7 +91,7 @@ class StreamSource:
         resized = [f"{n} frames of {w}×{h} resized to {w0}×{h0}"
                    for (w, h), n in sorted(self._resized.items())]
         # In place: a caller may hold on to the list.
-        self.notes[:] = [*self.info.notes, *self._found, *resized]
+        self.notes[:] = [*self._found, *resized]
 
     def frames(self) -> Iterator[SourceFrame]:
         """One pass over the selected range (see ``FrameSource``). Frame sizes resized in
