@@ -128,13 +128,17 @@ def _check_bag_target(path: Path) -> None:
 
 class Recorder:
     """Write ``RecordedStep``s to ``path`` as ``fmt`` (see the module and
-    ``tfalda_sim.recording.channels`` for the channels). Use as a context manager (an
-    exception discards the recording), or call ``close()``.
+    ``tfalda_sim.recording.channels`` for the channels). Use as a context manager (any
+    exception, a Ctrl-C too, discards the recording), or call ``close()``: a command that
+    survives a Ctrl-C catches it and calls ``close(keep=True)``, which keeps every step
+    written before it.
 
-    ``camera_info``: written with every frame on ``/camera/camera_info``; ``source``:
-    what the frames are (a track and seed, a replayed file), in the metadata;
-    ``compress_frames``: ``"png"`` (lossless, the default: a replay detects exactly as the
-    run did) or ``"jpeg"`` (smaller; not frame-identical). ``frames``: steps written."""
+    ``path``: a ``.mcap`` file, or the bag's folder (which may replace only an earlier
+    bag or an empty folder); ``camera_info``: written with every frame on
+    ``/camera/camera_info`` (its size must be the frames'); ``source``: what the frames
+    are (a track and seed, a replayed file), in the metadata; ``compress_frames``:
+    ``"png"`` (lossless, the default: a replay detects exactly as the run did) or
+    ``"jpeg"`` (smaller; not frame-identical). ``frames``: steps written so far."""
 
     def __init__(self, path: str | os.PathLike[str], fmt: RecordingFormat, *,
                  camera_info: CameraInfo | None = None, source: str = "",
