@@ -429,6 +429,7 @@ def _stress_parser(sub: Any) -> None:
     st.add_argument("--out", type=Path, default=Path("out/stress"), metavar="DIR",
                     help="folder for stress.jsonl, stress.json, stress.md and stress.png "
                          "(default: %(default)s)")
+    add_recording_options(st, "the drive with the LIS reset stage (one seed, one fault)")
     add_camera_option(st)
     add_vehicle_options(st)
     add_force_option(st, "an earlier report in --out")
@@ -455,9 +456,15 @@ def cmd_stress(args: argparse.Namespace) -> int:
 
     check_sweep_options(args)
     faults = args.faults
+    recording = args.mcap or args.rosbag
+    if recording is not None and (len(args.seeds) != 1 or len(faults) != 1):
+        raise CliError(f"--{'mcap' if args.mcap else 'rosbag'} records one drive: give one "
+                       f"seed (--seeds N:N+1) and one fault (--faults NAME); asked for "
+                       f"{len(args.seeds)} seeds and {len(faults)} faults")
     # --resume replaces the report of the run it continues (and its --results file).
-    check_outputs({"out": args.out, "results": args.results},
-                  {"out": DIRECTORY, "results": ".jsonl"}, args.force or args.resume,
+    check_outputs({"out": args.out, "results": args.results, **recording_outputs(args)},
+                  {"out": DIRECTORY, "results": ".jsonl", **RECORDING_SUFFIXES},
+                  args.force or args.resume,
                   files_in={"out": REPORT_FILES.values()},
                   inputs={"camera": camera_input(args.camera),
                           "timing": timing_input(args.timing)})
@@ -492,6 +499,8 @@ def cmd_stress(args: argparse.Namespace) -> int:
         if not rows:
             outs.abort()
             return sweep_exit(end, "no run had finished; nothing written")
+        if recording is not None and not end.early:
+            _record_stress_run(args, timing)
         with holding_stops():  # a second Ctrl-C must not lose the first one's results
             with open(files["json"], "w", encoding="utf-8") as fh:
                 json.dump(report_document(rows, tally.runs) | {
@@ -504,12 +513,30 @@ def cmd_stress(args: argparse.Namespace) -> int:
     if args.json:
         print(json_text({"summary": rows, "runs": tally.runs, "jobs": jobs,
                           "interrupted": end.early, "out": str(args.out),
-                          "vehicle": args.vehicle, "timing": args.timing}))
+                          "vehicle": args.vehicle, "timing": args.timing,
+                          "recording": str(recording) if recording is not None
+                          and not end.early else None}))
     else:
         print(markdown_table(rows))
         print(f"wrote {args.out}/: {written}")
+        if recording is not None and not end.early:
+            print(f"wrote {recording}")
     return sweep_exit(end, f"kept the {tally.runs} of {jobs} runs that had finished and "
                            f"their summary in {args.out}/ ({written})" + resume_hint(args))
+
+
+def _record_stress_run(args: argparse.Namespace, timing: Timing) -> None:
+    """The battery's drive with the LIS reset stage, run again in this process into the
+    recording (the sweep may have run it in a worker; the drive is deterministic, so it
+    is the same drive)."""
+    from .record import run_recorder
+    from .stress import run_one
+
+    seed, fault = args.seeds[0], args.faults[0]
+    rec = run_recorder(args.mcap, args.rosbag, f"stress seed-{seed} {fault}")
+    assert rec is not None
+    with rec:
+        run_one(seed, fault, True, args.camera, args.vehicle, timing, on_step=rec.step)
 
 
 def _speeds_arg(text: str) -> tuple[float, ...]:

@@ -29,7 +29,7 @@ from tfalda_sim.video import VideoWriter
 
 from .pid import LanePid
 from .policy_file import PolicyFileError, load_policy
-from .record import RunRecorder, open_recorder
+from .record import run_recorder
 from .train import distribution_checks_off
 
 
@@ -196,9 +196,9 @@ def drive(agent: Agent, track: Track, *, laps: int = 2, speed_m_s: float = 1.5,
     t0 = time.perf_counter()
     # The writers replace an existing file only when the drive ends without an error.
     with contextlib.ExitStack() as stack:
-        recorder = open_recorder(mcap, rosbag, env, label or track.name or "drive")
-        run_rec = RunRecorder(stack.enter_context(recorder)) if recorder else None
+        run_rec = run_recorder(mcap, rosbag, f"drive {label or track.name or ''}".strip())
         if run_rec is not None:
+            stack.enter_context(run_rec)
             run_rec.step(env, info)  # the start's frame: the detector's first
         writer = stack.enter_context(VideoWriter(video, rate_hz)) if video else None
         camera_writer = (stack.enter_context(VideoWriter(camera_video, rate_hz))

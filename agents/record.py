@@ -11,6 +11,7 @@ recording feeds the detector exactly the frames of the live run, in the same ord
 from __future__ import annotations
 
 from pathlib import Path
+from types import TracebackType
 from typing import Any
 
 import numpy as np
@@ -21,17 +22,17 @@ from tfalda_sim.recording import RecordedStep, Recorder, RecordingFormat
 from tfalda_sim.rendering.truth import frame_truth
 
 
-def open_recorder(mcap: Path | None, rosbag: Path | None, env: TfaldaTrackEnv,
-                  source: str) -> Recorder | None:
-    """The recorder of ``--mcap`` or ``--rosbag`` (None without either), with the env's
-    camera as the recording's camera_info."""
+def run_recorder(mcap: Path | None, rosbag: Path | None, source: str
+                 ) -> RunRecorder | None:
+    """The recorder of ``--mcap`` or ``--rosbag`` (None without either)."""
     if mcap is None and rosbag is None:
         return None
     if mcap is not None and rosbag is not None:
         raise ValueError("--mcap and --rosbag both record the run: give one")
-    path, fmt = ((mcap, RecordingFormat.MCAP) if mcap is not None
-                 else (rosbag, RecordingFormat.ROSBAG))
-    return Recorder(path, fmt, camera_info=camera_info_of(env.camera), source=source)
+    if mcap is not None:
+        return RunRecorder(mcap, RecordingFormat.MCAP, source)
+    assert rosbag is not None
+    return RunRecorder(rosbag, RecordingFormat.ROSBAG, source)
 
 
 def _segments(polyline: np.ndarray) -> np.ndarray:
@@ -43,11 +44,14 @@ def _segments(polyline: np.ndarray) -> np.ndarray:
 
 
 class RunRecorder:
-    """Feeds a ``Recorder`` from an env after each step: ``step(env, info)`` writes the
-    observed frame when it is a new one."""
+    """Records a run into ``path`` as ``fmt``: ``step(env, info)`` after the reset and
+    each step writes the observed frame when it is a new one (the recording opens at the
+    first, with the env's camera as its camera_info); ``close(keep)`` as ``Recorder``'s,
+    and as a context manager."""
 
-    def __init__(self, recorder: Recorder) -> None:
-        self.recorder = recorder
+    def __init__(self, path: Path, fmt: RecordingFormat, source: str) -> None:
+        self.path, self.fmt, self.source = Path(path), fmt, source
+        self.recorder: Recorder | None = None
         self._last: object = None  # the frame recorded last (a new result is a new object)
         self._last_t_s = -1.0
         self._offset_s = 0.0  # the episodes before this one (a recovery starts at step 0)
@@ -57,6 +61,9 @@ class RunRecorder:
         if frame is self._last:
             return  # no new result arrived: nothing the detector did
         self._last = frame
+        if self.recorder is None:
+            self.recorder = Recorder(self.path, self.fmt, camera_info=camera_info_of(env.camera),
+                                     source=self.source)
         rate = env.camera.frame_rate_hz
         t_s = self._offset_s + frame.step / rate
         if t_s <= self._last_t_s:  # a new episode: its steps count from 0 again
@@ -74,3 +81,19 @@ class RunRecorder:
             state=obs.state.value, pose=env.car_pose, speed_m_s=float(info["speed_m_s"]),
             truth_lanes=truth, cross_track_m=float(info["cross_track_m"]),
             top_view=env.top_view()))
+
+    @property
+    def frames(self) -> int:
+        """Frames recorded."""
+        return self.recorder.frames if self.recorder is not None else 0
+
+    def close(self, keep: bool = True) -> None:
+        if self.recorder is not None:
+            self.recorder.close(keep=keep)
+
+    def __enter__(self) -> RunRecorder:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close(keep=exc_type is None)

@@ -163,9 +163,12 @@ def _track_for(seed: int, fault: str, s_onset: float) -> Track:
 
 
 def run_one(seed: int, fault: str, roi_reset_stage: bool, camera: str = "thesis",
-            vehicle: str = "kinematic", timing: str | Timing = "ideal") -> StressRun:
+            vehicle: str = "kinematic", timing: str | Timing = "ideal",
+            on_step: Callable[[TfaldaTrackEnv, dict[str, Any]], None] | None = None
+            ) -> StressRun:
     """One closed-loop drive with ``fault`` on generated track ``seed`` by a car with
-    ``camera`` (a profile name or file), ``vehicle`` and ``timing`` (the env's)."""
+    ``camera`` (a profile name or file), ``vehicle`` and ``timing`` (the env's);
+    ``on_step(env, info)`` after the reset and each step (a recording)."""
     case = FAULTS[fault]
     base = generate(seed).with_elements(obstacles=())
     speed = FAST_CURVE_SPEED_M_S if fault == "fast_curve" else SPEED_M_S
@@ -181,8 +184,11 @@ def run_one(seed: int, fault: str, roi_reset_stage: bool, camera: str = "thesis"
         cfg = replace(cfg, lis=replace(cfg.lis, roi_reset=False))
     env = TfaldaTrackEnv(track=track, speed_m_s=speed, detector=cfg, camera=camera,
                          obstacles=fault == "obstacle", vehicle=vehicle, timing=timing)
-    obs, _ = env.reset(seed=seed, options={"start": (start_s, -0.5 * track.lane_width_m, 0.0),
-                                           "faults": case.make(s_onset)})
+    obs, info = env.reset(seed=seed, options={"start": (start_s, -0.5 * track.lane_width_m,
+                                                        0.0),
+                                              "faults": case.make(s_onset)})
+    if on_step is not None:
+        on_step(env, info)
     pid = LanePid(camera=env.camera)
     # The battery's seconds in this camera's frames, as the injector counts them.
     rate = env.camera.frame_rate_hz
@@ -194,6 +200,8 @@ def run_one(seed: int, fault: str, roi_reset_stage: bool, camera: str = "thesis"
     on_road = True
     for _ in range(steps):
         obs, _, terminated, _, info = env.step(pid.act(obs))
+        if on_step is not None:
+            on_step(env, info)
         hits.append(info["detector_hit_rate"])
         resets.append(bool(info["roi_reset"]))
         if terminated:

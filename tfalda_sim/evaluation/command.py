@@ -15,11 +15,14 @@ import numpy as np
 
 from ..camera import load_camera
 from ..camera.command import add_camera_option, camera_input
+from ..camera.ros_info import camera_info_of
 from ..cli_common import (
     DIRECTORY,
+    RECORDING_SUFFIXES,
     CliError,
     add_force_option,
     add_json_option,
+    add_recording_options,
     bounded_float_arg,
     bounded_int_arg,
     check_outputs,
@@ -31,6 +34,7 @@ from ..interrupts import holding_stops
 from ..perception import DetectorConfig, LaneObservation
 from ..perception.command import check_camera_geometry
 from ..perception.params import IMAGE_WIDTH_PX
+from ..recording import Recorder, RecordingFormat
 from ..rendering import FrameTruth, Renderer
 from ..sweep_runner import (
     SweepEnd,
@@ -58,7 +62,7 @@ PRESETS = {"thesis": DetectorConfig.thesis, "improved": DetectorConfig.improved}
 """The "with LIS" configurations ``--preset`` selects."""
 
 _SUFFIXES = {"plot": ".png", "xml": ".xml", "jsonl": ".jsonl", "video": ".mp4",
-             "results": ".jsonl"}
+             "results": ".jsonl", **RECORDING_SUFFIXES}
 
 
 def register(sub: Any) -> None:
@@ -130,6 +134,7 @@ def _evaluate_parser(sub: Any) -> None:
     ev.add_argument("--xml", type=Path, help="lanes per frame, thesis listing 4.1 (one track)")
     ev.add_argument("--jsonl", type=Path, help="every frame of every run as JSON Lines")
     ev.add_argument("--video", type=Path, help="MP4 with ROIs and lanes drawn (one track)")
+    add_recording_options(ev, "the drive (one track; the run with LIS)")
     add_camera_option(ev)
     add_force_option(ev)
     add_json_option(ev)
@@ -147,7 +152,8 @@ def _configs(args: argparse.Namespace) -> dict[str, DetectorConfig]:
     return {WITH_LIS: preset, WITHOUT_LIS: DetectorConfig.without_lis()}
 
 
-_SCENARIO_ONLY = ("seeds", "max_frames", "workers", "plot", "xml", "jsonl", "video",
+_SCENARIO_ONLY = ("seeds", "max_frames", "workers", "plot", "xml", "jsonl", "video", "mcap",
+                  "rosbag",
                   "ray_address", "results", "resume")
 _FRAMES_ONLY = ("labels", "detector", "repeat", "stills", "topic")
 
@@ -200,12 +206,12 @@ def _check(args: argparse.Namespace) -> None:
             args.parser.error(f"--speed {args.speed:g} × --stride {args.stride} does not fit "
                               f"the thesis' {args.scenario} drive: {exc}")
     if random and len(args.seeds) > 1:
-        for opt in ("xml", "video"):
+        for opt in ("xml", "video", "mcap", "rosbag"):
             if getattr(args, opt) is not None:
                 raise CliError(f"--{opt} writes one track's run; give a single seed "
                                f"(--seeds {args.seeds.start}:{args.seeds.start + 1})")
     if random and _is_sweep(args):
-        for opt in ("xml", "video"):
+        for opt in ("xml", "video", "mcap", "rosbag"):
             if getattr(args, opt) is not None:
                 args.parser.error(f"--{opt} records one track's run in this process; not "
                                   "with --results or --backend ray")
@@ -252,7 +258,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         _print_table(out)
     what = (f"kept the {out['tracks_done']} of {len(args.seeds)} tracks that had finished"
             if "tracks_done" in out else f"kept the {out['frames_done']} frames evaluated so far")
-    files = [out[k] for k in ("plot", "xml", "jsonl", "video", "results") if k in out]
+    files = [out[k] for k in ("plot", "xml", "jsonl", "video", "recording", "results")
+             if k in out]
     return sweep_exit(end, what + (f" ({', '.join(files)})" if files else "")
                       + resume_hint(args))
 
@@ -423,6 +430,13 @@ def _evaluate_one(args: argparse.Namespace, configs: Mapping[str, DetectorConfig
             writer = stack.enter_context(VideoWriter(outs.path(args.video),
                                                      FRAME_RATE_HZ / args.stride))
             hook = _video_hook(writer, _primary_label(configs))
+        if args.mcap is not None or args.rosbag is not None:
+            recorder = stack.enter_context(Recorder(
+                args.mcap or args.rosbag,
+                RecordingFormat.MCAP if args.mcap is not None else RecordingFormat.ROSBAG,
+                camera_info=camera_info_of(load_camera(args.camera)),
+                source=f"evaluate {scenario.name}"))
+            hook = _both(hook, _recording_hook(recorder, _primary_label(configs), scenario))
         try:
             single = run_scenario(scenario, configs, epsilon_px=args.epsilon_px,
                                   progress=progress, on_frame=hook,
@@ -448,6 +462,8 @@ def _write_one_outputs(args: argparse.Namespace, configs: Mapping[str, DetectorC
     out["frames_done"] = len(next(iter(single.values())).seq)
     if args.video is not None:
         out["video"] = str(args.video)
+    if args.mcap is not None or args.rosbag is not None:
+        out["recording"] = str(args.mcap or args.rosbag)
     if kind is ScenarioKind.RANDOM:
         out["seeds"] = [args.seeds.start, args.seeds.stop]
         out["per_seed"] = [run.summary() for run in single.values()]
@@ -496,6 +512,49 @@ def _video_hook(writer: Any, label: str) -> Any:
     return hook
 
 
+def _both(first: Any, second: Any) -> Any:
+    """One frame hook calling ``first`` (if any) and ``second``."""
+    if first is None:
+        return second
+
+    def hook(*args: Any) -> None:
+        first(*args)
+        second(*args)
+
+    return hook
+
+
+def _recording_hook(recorder: Any, label: str, scenario: Any) -> Any:
+    """Each frame of ``label``'s run into ``recorder``: the frame, lanes, LIS state, the
+    ground truth (the ego lane's boundaries, the cross-track error from the right lane's
+    centre, left > 0) and the scripted car's pose and speed."""
+    from ..recording import RecordedStep
+
+    traj, track = scenario.trajectory, scenario.track
+
+    def segments(polyline: np.ndarray) -> np.ndarray:
+        pts = polyline[np.all(np.isfinite(polyline), axis=1)]
+        return (np.hstack([pts[:-1], pts[1:]]) if len(pts) >= 2 else np.zeros((0, 4)))
+
+    def hook(seq: int, frame: np.ndarray, truth: FrameTruth,
+             observations: Mapping[str, LaneObservation]) -> None:
+        k = seq - scenario.first_seq
+        obs = observations[label]
+        x, y, yaw = (float(v) for v in traj.pose(k))
+        s_hint = float(traj.s_m[k]) if np.isfinite(traj.s_m[k]) else None
+        lateral = track.locate(x, y, s_hint_m=s_hint).lateral_m
+        recorder.write(RecordedStep(
+            t_s=float(traj.times_s[k] - traj.times_s[0]), frame=frame, lanes=obs.lanes,
+            accepted=np.all(np.isfinite(obs.lanes), axis=1) & ~obs.replaced, rois=obs.rois,
+            fault_counter=int(obs.fault_count), roi_reset=bool(obs.roi_reset),
+            state=obs.state.value, pose=(x, y, yaw), speed_m_s=float(traj.speeds_m_s[k]),
+            truth_lanes=np.vstack([segments(truth.left_boundary_px),
+                                   segments(truth.right_boundary_px)]),
+            cross_track_m=lateral + 0.5 * track.lane_width_m))
+
+    return hook
+
+
 def _print_table(out: dict[str, Any]) -> None:
     rows = (out["pooled"] if "pooled" in out else out["summary"])
     head = f"{'run':34} {'frames':>7} {'mean':>6} {'min':>6} {'<0.75':>6} {'resets':>6} " \
@@ -509,7 +568,7 @@ def _print_table(out: dict[str, Any]) -> None:
               f"{s['min_confidence']:6.3f} {s['frames_below_0_75']:6d} {s['roi_resets']:6d} "
               f"{acc if acc is not None else float('nan'):6.3f} "
               f"{s['false_positive_rate']:6.3f} {s['false_negative_rate']:6.3f}")
-    for key in ("plot", "xml", "jsonl", "video", "results"):
+    for key in ("plot", "xml", "jsonl", "video", "recording", "results"):
         if key in out:
             print(f"wrote {out[key]}")
 

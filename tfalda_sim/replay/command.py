@@ -9,13 +9,16 @@ from typing import Any
 
 from ..camera.command import add_camera_option, camera_input
 from ..cli_common import (
+    RECORDING_SUFFIXES,
     CliError,
     add_force_option,
     add_json_option,
+    add_recording_options,
     bounded_float_arg,
     check_outputs,
     json_text,
     positive_int_arg,
+    recording_outputs,
 )
 from ..fileio import WriteError
 from ..perception.command import check_camera_geometry
@@ -62,6 +65,7 @@ def register(sub: Any) -> None:
     rp.add_argument("--per-frame", type=Path, metavar="F.jsonl",
                     help="one JSON line a frame: frame, loop, t_s, and lanes, accepted, "
                          "fault_counter, roi_reset, state (tfalda) or segments (hough)")
+    add_recording_options(rp, "the replay (frames, lanes or segments, LIS state)")
     rp.add_argument("--stages", action="store_true",
                     help="hough: write the seed's 2×2 stage view to --out instead")
     add_camera_option(rp)
@@ -92,8 +96,8 @@ def add_source_options(parser: argparse.ArgumentParser) -> None:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    check_outputs({"out": args.out, "per-frame": args.per_frame},
-                  {"out": ".mp4", "per-frame": ".jsonl"}, args.force,
+    check_outputs({"out": args.out, "per-frame": args.per_frame, **recording_outputs(args)},
+                  {"out": ".mp4", "per-frame": ".jsonl", **RECORDING_SUFFIXES}, args.force,
                   inputs={"source": args.source, "camera": camera_input(args.camera)})
     camera = check_camera_geometry(args.camera)
     if args.hough_preset is not None and args.detector != Detector.HOUGH.value:
@@ -112,7 +116,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
                         hough=HoughPreset(args.hough_preset), stages=args.stages,
                         progress=sys.stderr.isatty() or not args.json, camera=camera,
                         max_frames=args.max_frames, topic=args.topic, frames=args.frames,
-                        rate_hz=args.rate, per_frame=args.per_frame)
+                        rate_hz=args.rate, per_frame=args.per_frame, mcap=args.mcap,
+                        rosbag=args.rosbag)
         result["camera"] = args.camera
     except (FileNotFoundError, VideoError, SourceError, WriteError) as exc:
         raise CliError(str(exc)) from None
@@ -139,7 +144,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print("converted: " + ", ".join(result["conversions"]))
     if result["rate_note"]:
         print(f"note: {result['rate_note']}")
-    for key in ("out", "per_frame"):
+    for key in ("out", "per_frame", "recording"):
         if result[key]:
             print(f"wrote {result[key]}")
     return code

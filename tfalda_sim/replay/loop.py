@@ -35,6 +35,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..camera import Camera, load_camera
+from ..camera.ros_info import camera_info_of
 from ..cli_common import json_text
 from ..fileio import atomic_write
 from ..histogram import TimeHistogram
@@ -53,6 +54,7 @@ from ..perception.hough import (
     HoughResult,
 )
 from ..perception.params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX, is_thesis_camera
+from ..recording import RecordedStep, Recorder, RecordingFormat
 from ..rendering.overlay import draw_hough, draw_observation, stage_view
 from ..sources import FrameRange, SourceError, SourceInfo, open_source, to_grey
 from ..video import VideoWriter, is_grey
@@ -143,6 +145,40 @@ def _conversions(info: SourceInfo, first: np.ndarray, size: tuple[int, int]) -> 
     return out
 
 
+class _RecordingClock:
+    """A recording's time stamps for the replayed frames: the source's own, made to
+    increase over the loops (a pass starts a frame interval after the last), and frame
+    counts at ``fps`` where the source has none."""
+
+    def __init__(self, fps: float) -> None:
+        self.dt_s = 1.0 / fps
+        self.last_s = -math.inf
+        self.offset_s = 0.0
+
+    def time(self, t_s: float) -> float:
+        if not math.isfinite(t_s):
+            t = self.last_s + self.dt_s if math.isfinite(self.last_s) else 0.0
+        else:
+            t = self.offset_s + t_s
+            if t <= self.last_s:  # the next pass over the recording
+                self.offset_s = self.last_s + self.dt_s - t_s
+                t = self.offset_s + t_s
+        self.last_s = t
+        return t
+
+
+def _recorded(t_s: float, frame: np.ndarray, result: HoughResult | LaneObservation
+              ) -> RecordedStep:
+    """One replayed frame as a recording's step."""
+    if isinstance(result, HoughResult):
+        return RecordedStep(t_s=t_s, frame=frame, segments=result.segments)
+    finite = np.all(np.isfinite(result.lanes), axis=1)
+    return RecordedStep(t_s=t_s, frame=frame, lanes=result.lanes,
+                        accepted=finite & ~result.replaced, rois=result.rois,
+                        fault_counter=int(result.fault_count),
+                        roi_reset=bool(result.roi_reset), state=result.state.value)
+
+
 def rate_note(recording_hz: float | None, camera_hz: float) -> str | None:
     """The line saying that the recording's frame rate is not the camera profile's, or
     None when they agree (within ``RATE_MISMATCH``) or the recording has none."""
@@ -161,7 +197,8 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
            stages: bool = False, progress: bool = False, camera: Camera | None = None,
            max_frames: int | None = None, topic: str | None = None,
            frames: FrameRange | None = None, rate_hz: float | None = None,
-           per_frame: Path | None = None) -> dict[str, Any]:
+           per_frame: Path | None = None, mcap: Path | None = None,
+           rosbag: Path | None = None) -> dict[str, Any]:
     """Replay the recording ``path`` (anything ``sources.open_source`` reads: a video, an
     image folder or glob, a ROS 1/2 bag, an MCAP file; ``topic``, ``frames`` and
     ``rate_hz`` as there) ``loops`` times (``None``: until Ctrl-C) through ``detector``,
@@ -169,7 +206,9 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
     processing frame rate, detector ms/frame, detections, conversions, and how it stopped
     (``"loops"``, ``"max_frames"`` or ``"interrupted"``). ``out`` gets the annotated
     frames, or with ``stages`` (Hough only) the seed's 2×2 stage view of each frame;
-    ``per_frame`` a JSON line a frame (``per_frame.py``). ``camera`` (default: the
+    ``per_frame`` a JSON line a frame (``per_frame.py``); ``mcap`` / ``rosbag`` the replay
+    as a recording (the frames as the detector saw them, its lanes or segments, the LIS
+    state: ``recording``). ``camera`` (default: the
     thesis'): frames are converted to its size and both detectors use the geometry derived
     for it. Every output is written
     in full or not at all; a Ctrl-C keeps the frames finished in each."""
@@ -187,7 +226,10 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
     tfalda_cfg = DetectorConfig.thesis() if camera is None else \
         DetectorConfig.thesis().on_camera(camera)
     tfalda_det = TfaldaDetector(tfalda_cfg) if detector is Detector.TFALDA else None
-    camera_hz = (camera or load_camera("thesis")).frame_rate_hz
+    if mcap is not None and rosbag is not None:
+        raise ValueError("mcap and rosbag both record the replay: give one")
+    cam = camera or load_camera("thesis")
+    camera_hz = cam.frame_rate_hz
     fps = info.rate_hz if info.rate_hz and math.isfinite(info.rate_hz) and info.rate_hz > 0 \
         else DEFAULT_FPS
     per_loop = info.frame_count or None
@@ -198,6 +240,8 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
     conversions: list[str] | None = None
     t_start = time.perf_counter()
     writer: VideoWriter | None = None
+    recorder: Recorder | None = None
+    clock = _RecordingClock(fps)
     bar = None
     keep = False  # the outputs replace existing files only after a clean stop
     with contextlib.ExitStack() as outputs:
@@ -205,6 +249,10 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
             if out is not None:
                 writer = VideoWriter(out, fps)
             lines = outputs.enter_context(atomic_write(per_frame)) if per_frame else None
+            if mcap is not None or rosbag is not None:
+                recorder = Recorder(mcap or rosbag, RecordingFormat.MCAP if mcap is not None
+                                    else RecordingFormat.ROSBAG,
+                                    camera_info=camera_info_of(cam), source=str(path))
             total = loops * per_loop if loops and per_loop else None
             if max_frames is not None:
                 total = min(total or max_frames, max_frames)
@@ -232,6 +280,8 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
                                        else segments_record)
                         lines.write(json_text(record_line(item.index, passes, item.t_s,
                                                           result)) + "\n")
+                    if recorder is not None:
+                        recorder.write(_recorded(clock.time(item.t_s), frame, result))
                     bar.update()
                     if max_frames is not None and n >= max_frames:
                         stopped = "max_frames"
@@ -253,6 +303,8 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
                     bar.close()
                 if writer is not None:
                     writer.close(keep=keep)
+                if recorder is not None:
+                    recorder.close(keep=keep)
     wall = time.perf_counter() - t_start
     notes = [*info.notes, *getattr(source, "notes", [])]
     note = rate_note(info.rate_hz, camera_hz)
@@ -274,4 +326,6 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
         "roi_resets": resets if detector is Detector.TFALDA else None,
         "out": str(out) if writer is not None and writer.frames else None,
         "per_frame": str(per_frame) if per_frame is not None else None,
+        "recording": str(mcap or rosbag) if recorder is not None and recorder.frames
+        else None,
     }
