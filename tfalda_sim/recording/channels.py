@@ -16,9 +16,11 @@ topic                          type                                written when
 /topdown/image/compressed      sensor_msgs/msg/CompressedImage     top_view
 =============================  ==================================  =========================
 
-Every message of a step has the step's time stamp, ``header.stamp`` = epoch 0 + ``t_s``
-(1970-01-01 00:00:00 is the run's start), which is also the messages' log time: Foxglove
-pairs an image with its annotations and camera_info by it.
+Every message of a step has the step's time stamp, ``header.stamp`` = the recording's
+start + ``t_s`` (the recorder's ``start_ns``: by default the wall-clock time it was made,
+so Foxglove shows when the run was recorded, and no frame has the stamp 0 that ROS tools
+read as "no stamp"), which is also the messages' log time: Foxglove pairs an image with
+its annotations and camera_info by it.
 
 - The camera frame is PNG (lossless: a replay of the recording detects exactly what the
   run detected), frame ``camera``; the top view is JPEG (``TOP_VIEW_JPEG_QUALITY``),
@@ -102,8 +104,8 @@ PIXEL_CENTRE = 0.5
 """Where the detector's pixel (0, 0) is in Foxglove's image coordinates [px]."""
 
 
-def stamp_ns(t_s: float) -> int:
-    """A step's time as the recording's time stamp [ns since epoch 0]."""
+def offset_ns(t_s: float) -> int:
+    """A step's time from the run's start [s] in the recording's unit [ns]."""
     return round(t_s * 1e9)
 
 
@@ -267,9 +269,9 @@ class StepMessages:
                     for pts, rgba, width, kind in points if pts],
             texts=texts)
 
-    def messages(self, step: RecordedStep) -> list[tuple[Channel, Any]]:
-        """The step's messages, ``(channel, message)``, in ``CHANNELS`` order."""
-        ns = stamp_ns(step.t_s)
+    def messages(self, step: RecordedStep, ns: int) -> list[tuple[Channel, Any]]:
+        """The step's messages, ``(channel, message)``, in ``CHANNELS`` order, stamped
+        ``ns`` [ns since the Unix epoch]."""
         out: list[tuple[Channel, Any]] = [
             (CAMERA_IMAGE, self._compressed(ns, CAMERA_IMAGE.frame_id, step.frame,
                                             self.image_format, JPEG_QUALITY))]

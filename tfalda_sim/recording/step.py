@@ -45,7 +45,7 @@ class RecordedStep:
 
     t_s: float
     """Time of the frame from the run's start [s]; finite, ≥ 0, increasing from step to
-    step (the recording's time stamps: epoch 0 + ``t_s``)."""
+    step (a message's time stamp is the recording's start + ``t_s``)."""
     frame: np.ndarray
     """(H, W) uint8 grey camera frame, as the detector saw it."""
     lanes: np.ndarray | None = None

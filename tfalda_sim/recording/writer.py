@@ -27,6 +27,7 @@ import enum
 import os
 import re
 import shutil
+import time
 from pathlib import Path
 from types import TracebackType
 from typing import IO
@@ -42,7 +43,7 @@ from tfalda_sim.fileio import (
     unstage,
 )
 from tfalda_sim.interrupts import deferring_stops, holding_stops
-from tfalda_sim.recording.channels import CAMERA_IMAGE, StepMessages, stamp_ns
+from tfalda_sim.recording.channels import CAMERA_IMAGE, StepMessages, offset_ns
 from tfalda_sim.recording.messages import typestore
 from tfalda_sim.recording.sinks import BagSink, McapSink, Sink
 from tfalda_sim.recording.step import RecordedStep
@@ -138,11 +139,13 @@ class Recorder:
     ``/camera/camera_info`` (its size must be the frames'); ``source``: what the frames
     are (a track and seed, a replayed file), in the metadata; ``compress_frames``:
     ``"png"`` (lossless, the default: a replay detects exactly as the run did) or
-    ``"jpeg"`` (smaller; not frame-identical). ``frames``: steps written so far."""
+    ``"jpeg"`` (smaller; not frame-identical); ``start_ns``: the run's start as a time
+    stamp [ns since the Unix epoch] (None: now; give one for byte-identical files).
+    ``frames``: steps written so far."""
 
     def __init__(self, path: str | os.PathLike[str], fmt: RecordingFormat, *,
                  camera_info: CameraInfo | None = None, source: str = "",
-                 compress_frames: str = "png") -> None:
+                 compress_frames: str = "png", start_ns: int | None = None) -> None:
         self.path = Path(path)
         self.format = RecordingFormat(fmt)
         if self.format is RecordingFormat.MCAP and self.path.suffix.lower() != MCAP_SUFFIX:
@@ -152,6 +155,9 @@ class Recorder:
         typestore()  # the types are built now, not within the first frame
         self.camera_info = camera_info
         self.source = source
+        self.start_ns = time.time_ns() if start_ns is None else int(start_ns)
+        if self.start_ns < 0:
+            raise ValueError(f"start_ns must be ≥ 0 [ns since the Unix epoch], got {start_ns}")
         self.frames = 0
         self._last_ns = -1
         self._size: tuple[int, int] | None = None
@@ -251,7 +257,7 @@ class Recorder:
     def _check(self, step: RecordedStep, ns: int) -> None:
         if ns <= self._last_ns:
             raise ValueError(f"steps must come in time order: t_s {step.t_s} s is not after "
-                             f"the previous step's {self._last_ns / 1e9} s")
+                             f"the previous step's {(self._last_ns - self.start_ns) / 1e9} s")
         h, w = step.frame.shape
         if self._size is None:
             info = self.camera_info
@@ -269,14 +275,14 @@ class Recorder:
             raise ValueError(f"the recorder of {self.path} is closed")
         if self._failed is not None:
             raise self._failed
-        ns = stamp_ns(step.t_s)
+        ns = self.start_ns + offset_ns(step.t_s)
         self._check(step, ns)
         # Encoded and serialized first (the slow part, which may be interrupted freely),
         # then written whole under a deferred stop: an interrupt inside the writer would
         # leave a torn chunk that no reader can read past.
         store = typestore()
         payload = [(ch, bytes(store.serialize_cdr(msg, ch.msgtype)))
-                   for ch, msg in self._encoder.messages(step)]
+                   for ch, msg in self._encoder.messages(step, ns)]
         assert self._sink is not None
         try:
             with deferring_stops():

@@ -109,6 +109,6 @@ def read_bag(path: Path) -> Readback:
     return out
 
 
-def stamp_s(header: Any) -> float:
-    """A header's stamp [s]."""
-    return header.stamp.sec + header.stamp.nanosec * 1e-9
+def stamp_ns(time: Any) -> int:
+    """A ``builtin_interfaces/Time`` [ns]."""
+    return int(time.sec) * 1_000_000_000 + int(time.nanosec)

@@ -8,6 +8,7 @@ import math
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +22,7 @@ from tests.tfalda_sim.recording.readback import (
     Readback,
     read_bag,
     read_mcap,
-    stamp_s,
+    stamp_ns,
     steps,
 )
 from tfalda_sim import __version__
@@ -36,6 +37,9 @@ from tfalda_sim.recording import (
 from tfalda_sim.recording.channels import CHANNELS
 from tfalda_sim.recording.writer import remove_stale_bag_folders
 
+START_NS = 1_700_000_000_123_456_789
+"""The runs' start in most tests [ns since the Unix epoch]: stamps to compare exactly."""
+
 ALL_TOPICS = {ch.topic for ch in CHANNELS}
 TRUTH_TOPICS = {"/car/pose", "/car/odometry", "/truth/cross_track"}
 
@@ -45,7 +49,7 @@ def target(tmp_path: Path, fmt: RecordingFormat) -> Path:
 
 
 def record(path: Path, fmt: RecordingFormat, run: list[RecordedStep], **kwargs: Any) -> None:
-    with Recorder(path, fmt, **kwargs) as rec:
+    with Recorder(path, fmt, **{"start_ns": START_NS, **kwargs}) as rec:
         for step in run:
             rec.write(step)
         assert rec.frames == len(run)
@@ -95,12 +99,12 @@ def test_a_run_reads_back_exactly_on_every_channel(tmp_path: Path, fmt: Recordin
             if back.encodings:
                 assert back.encodings[ch.topic] == "ros2msg"
             # Every message of a step is stamped (header and log time) with its time.
-            assert back.times[ch.topic] == [round(s.t_s * 1e9) for s in run]
+            assert back.times[ch.topic] == [START_NS + round(s.t_s * 1e9) for s in run]
         m = back.messages
         for k, step in enumerate(run):
             img = m[CAMERA_TOPIC][k]
             assert img.format == "png" and img.header.frame_id == "camera"
-            assert stamp_s(img.header) == pytest.approx(step.t_s, abs=1e-9)
+            assert stamp_ns(img.header.stamp) == START_NS + round(step.t_s * 1e9)
             np.testing.assert_array_equal(decode(img), step.frame)
             top = decode(m["/topdown/image/compressed"][k])
             assert top.shape == step.top_view.shape  # JPEG: the picture, not its bytes
@@ -174,8 +178,8 @@ def test_the_annotations_draw_the_lanes_rois_segments_and_truth(tmp_path: Path) 
         assert all(a.type == 2 for a in ann.points if a.outline_color.b == c.ROI_COLOR[2])
         (text,) = ann.texts
         assert step.state in text.text
-        assert all(a.timestamp.sec * 10**9 + a.timestamp.nanosec == round(step.t_s * 1e9)
-                   for a in ann.points)
+        assert {stamp_ns(a.timestamp) for a in [*ann.points, *ann.texts]} == \
+            {START_NS + round(step.t_s * 1e9)}
 
 
 @pytest.mark.parametrize("fmt", list(RecordingFormat))
@@ -354,3 +358,39 @@ def test_a_killed_runs_bag_folder_is_removed_by_the_next(tmp_path: Path) -> None
     mine.mkdir()  # this process' own: a recording in progress
     assert remove_stale_bag_folders(tmp_path) == [stale]
     assert not stale.exists() and mine.is_dir()
+
+
+def test_a_recording_starts_at_the_time_it_was_made(tmp_path: Path) -> None:
+    """By default the stamps are wall-clock times (Foxglove shows when the run was), and
+    the first frame's is not 0, which ROS tools read as "no stamp"."""
+    before = time.time_ns()
+    path = tmp_path / "now.mcap"
+    with Recorder(path, RecordingFormat.MCAP) as rec:
+        for step in steps(3, truth=False, top_view=False):
+            rec.write(step)
+    after = time.time_ns()
+    times = read_mcap(path).times[CAMERA_TOPIC]
+    assert before <= times[0] <= after
+    assert np.diff(times).tolist() == [20_000_000, 20_000_000]
+
+
+@pytest.mark.parametrize("fmt", list(RecordingFormat))
+def test_our_frame_sources_read_a_recording_back_frame_identically(
+        tmp_path: Path, fmt: RecordingFormat) -> None:
+    """The replay's reader finds the camera among the two image topics by the recording's
+    metadata, and gets every frame, time and the camera_info as the run had them."""
+    from tfalda_sim.sources.open import open_source
+
+    run = steps(5)
+    path = target(tmp_path, fmt)
+    record(path, fmt, run, camera_info=CAMERA_INFO)
+    source = open_source(path)
+    assert source.info.topic == CAMERA_TOPIC
+    assert source.info.camera_info is not None
+    np.testing.assert_array_equal(source.info.camera_info.K, CAMERA_INFO.K)
+    assert not [n for n in source.info.notes if "stamp" in n]
+    frames = list(source.frames())
+    assert len(frames) == len(run)
+    for got, step in zip(frames, run, strict=True):
+        np.testing.assert_array_equal(got.image, step.frame)
+        assert got.t_s == pytest.approx(step.t_s, abs=1e-9)
