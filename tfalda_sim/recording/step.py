@@ -37,11 +37,11 @@ def _check(name: str, value: np.ndarray | None, shape: tuple[int | None, ...],
         raise ValueError(f"{name} must hold {want} numbers, got {value.dtype}")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # arrays: == would be ambiguous; a step is itself only
 class RecordedStep:
-    """What a recording keeps of one camera frame (see ``tfalda_sim.recording``'s channel
-    table). Image coordinates are the detector's: x right, y down [px], the centre of the
-    top-left pixel at (0, 0)."""
+    """What a recording keeps of one camera frame (see ``tfalda_sim.recording.channels``
+    for the channel table). Image coordinates are the detector's: x right, y down [px],
+    the centre of the top-left pixel at (0, 0)."""
 
     t_s: float
     """Time of the frame from the run's start [s]; finite, ≥ 0, increasing from step to
