@@ -189,6 +189,8 @@ class Recorder:
         return {"camera_topic": CAMERA_TOPIC, "source": self.source, "version": __version__}
 
     def _open_mcap(self) -> McapSink:
+        if self.path.is_dir():
+            raise WriteError(self.path, "a folder is in its place; give a file name")
         fd, self._tmp = create_temp(self.path.parent, MCAP_SUFFIX)
         self._stage(self._tmp)
         self._stream = os.fdopen(fd, "wb")

@@ -337,6 +337,10 @@ def test_paths_and_formats_are_checked_before_any_file(tmp_path: Path) -> None:
     with pytest.raises(OSError, match=f"cannot write {folder}: .*not a ROS 2 bag"):
         Recorder(folder, RecordingFormat.ROSBAG)
     assert (folder / "holiday.jpg").read_bytes() == b"precious"
+    (tmp_path / "dir.mcap").mkdir()
+    with pytest.raises(OSError, match=r"dir\.mcap: a folder is in its place"):
+        Recorder(tmp_path / "dir.mcap", RecordingFormat.MCAP)
+    (tmp_path / "dir.mcap").rmdir()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["photos"]
 
 
