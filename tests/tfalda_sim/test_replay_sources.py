@@ -234,3 +234,21 @@ def test_ctrl_c_keeps_the_per_frame_lines_of_the_finished_frames(
     assert main(["replay", str(bag), "--detector", "tfalda", "--per-frame", str(out)]) == 130
     assert [json.loads(x)["frame"] for x in out.read_text().splitlines()] == [0, 1, 2, 3]
     capsys.readouterr()
+
+
+@pytest.mark.parametrize("option", ["--mcap", "--rosbag"])
+def test_a_replay_recorded_replays_to_the_same_lanes(option: str, frames: list[np.ndarray],
+                                                     tmp_path: Path) -> None:
+    bag = write_ros1_bag(tmp_path / "run.bag", frames, stamps())
+    out = "again.mcap" if option == "--mcap" else "again"
+    first = tfalda("replay", bag, "--detector", "tfalda", "--loops", "2", option, out,
+                   "--per-frame", "a.jsonl", "--json", cwd=tmp_path).json()
+    assert first["recording"] == out
+    second = tfalda("replay", out, "--detector", "tfalda", "--per-frame", "b.jsonl", "--json",
+                    cwd=tmp_path).json()
+    assert second["frames"] == 2 * FRAMES
+    assert second["recording_rate_hz"] == pytest.approx(RATE_HZ)
+    a = [json.loads(x) for x in (tmp_path / "a.jsonl").read_text().splitlines()]
+    b = [json.loads(x) for x in (tmp_path / "b.jsonl").read_text().splitlines()]
+    assert [x["lanes"] for x in a] == [x["lanes"] for x in b]
+    assert [x["t_s"] for x in b] == pytest.approx([k / RATE_HZ for k in range(2 * FRAMES)])
