@@ -88,7 +88,7 @@ class StreamSource:
 
     def _refresh(self) -> None:
         w0, h0 = self.info.width_px, self.info.height_px
-        resized = [f"{n} frames of {w}×{h} resized to {w0}×{h0}"
+        resized = [f"{n} frame{'s' if n != 1 else ''} of {w}×{h} resized to {w0}×{h0}"
                    for (w, h), n in sorted(self._resized.items())]
         # In place: a caller may hold on to the list.
         self.notes[:] = [*self._found, *resized]

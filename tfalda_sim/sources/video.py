@@ -15,6 +15,10 @@ from tfalda_sim.sources.base import FrameRange, SourceError, SourceInfo
 from tfalda_sim.sources.decode import as_uint8
 from tfalda_sim.sources.stream import Loader, StreamSource, range_count
 
+NOT_VIDEO_CODECS = frozenset({"ansi"})
+"""Codecs of files ffmpeg opens that are not videos: its tty demuxer shows any text file
+as ANSI art."""
+
 REENCODE = "re-encode it, e.g. `ffmpeg -i IN -c:v mpeg4 -q:v 2 OUT.mp4`"
 """What to do with a video this OpenCV cannot decode (as ``tfalda_sim.video``)."""
 
@@ -28,7 +32,7 @@ def opens_as_video(path: Path) -> bool:
     """OpenCV opens ``path`` as a video (whether any frame decodes is not checked)."""
     cap = cv2.VideoCapture(str(path))
     try:
-        return bool(cap.isOpened())
+        return bool(cap.isOpened()) and _codec(cap).lower() not in NOT_VIDEO_CODECS
     finally:
         cap.release()
 
@@ -55,6 +59,7 @@ class VideoSource(StreamSource):
             cap.release()
         self.fps = fps if math.isfinite(fps) and fps > 0 else 0.0
         total = declared if declared > 0 else None
+        self._declared = total
         notes: list[str] = []
         if rate_hz is not None:
             notes.append(f"time stamps from --rate {rate_hz:g} Hz (index / rate)"
@@ -106,5 +111,8 @@ class VideoSource(StreamSource):
 
                 yield index, load
                 index += 1
+            if self._declared is not None and index < self._declared:
+                self.note(f"the video ends after {index} of the {self._declared} frames its "
+                          "container declares (cut short or damaged)")
         finally:
             cap.release()
