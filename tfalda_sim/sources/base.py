@@ -104,9 +104,12 @@ class SourceInfo:
 
 class FrameSource(Protocol):
     """A recording read as frames: ``frames()`` is one pass over the selected range, and
-    can be called again (``replay --loops``)."""
+    can be called again (``replay --loops``). ``notes``: conversions noticed while reading
+    (frames of another size resized, with counts); ``info.notes`` has those known at
+    opening."""
 
     info: SourceInfo
+    notes: list[str]
 
     def frames(self) -> Iterator[SourceFrame]: ...
 

@@ -90,15 +90,18 @@ def glob_images(pattern: str) -> list[Path]:
     return natsorted(files, alg=ns.PATH)
 
 
-def read_image(path: Path) -> np.ndarray:
-    """One image file as uint8 grey or BGR; a ``SourceError`` naming it when it is not
-    one."""
+DEEP_NOTE = "images of more than 8 bits → 8 bit: the top byte of each pixel"
+
+
+def read_image(path: Path) -> tuple[np.ndarray, bool]:
+    """One image file as uint8 grey or BGR, and whether it had more than 8 bits; a
+    ``SourceError`` naming it when it is not an image."""
     image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if image is None:
         reason = "no such file" if not path.exists() else \
             "not an image OpenCV can read (PNG, JPEG, …), or damaged"
         raise SourceError(f"{path}: {reason}; replace it or remove it from the frames")
-    return as_uint8(image)
+    return as_uint8(image), image.dtype != np.uint8
 
 
 class ImageSource(StreamSource):
@@ -109,8 +112,8 @@ class ImageSource(StreamSource):
                  rate_hz: float | None = None) -> None:
         self.files = files
         count = range_count(path, len(files), frames)
-        first = read_image(files[0])
-        notes: list[str] = []
+        first, deep = read_image(files[0])
+        notes: list[str] = [DEEP_NOTE] if deep else []
         self._stamps_ns: list[int] | None = None
         self._rate = rate_hz
         if rate_hz is not None:
@@ -157,6 +160,9 @@ class ImageSource(StreamSource):
     def _items(self) -> Iterator[tuple[int, Loader]]:
         for index, file in enumerate(self.files):
             def load(index: int = index, file: Path = file) -> tuple[float, np.ndarray]:
-                return self._t_s(index), read_image(file)
+                image, deep = read_image(file)
+                if deep:
+                    self.note(DEEP_NOTE)
+                return self._t_s(index), image
 
             yield index, load

@@ -235,7 +235,7 @@ class McapSource(StreamSource):
                 break
             if first is None:
                 first = (msgtype, msg)
-            logged += stamp_ns(msg) == 0
+            logged += stamp_ns(msg) == 0 and message.log_time != 0
             stamps.append(self._stamp_of(msg, message.log_time))
             if len(stamps) >= RATE_SAMPLE_FRAMES:
                 break

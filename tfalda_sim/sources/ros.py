@@ -226,7 +226,7 @@ class RosBagSource(StreamSource):
                 break
             if first is None:
                 first = (msgtype, msg)
-            logged += stamp_ns(msg) == 0
+            logged += stamp_ns(msg) == 0 and log_ns != 0
             stamps.append(self._stamp_of(msg, log_ns))
             if len(stamps) >= RATE_SAMPLE_FRAMES:
                 break

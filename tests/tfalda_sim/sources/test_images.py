@@ -12,7 +12,7 @@ import pytest
 
 from tests.tfalda_sim.sources.recordings import write_image_folder
 from tfalda_sim.sources import FrameRange, SourceError, open_source
-from tfalda_sim.sources.images import NO_STAMPS, name_stamp_ns
+from tfalda_sim.sources.images import DEEP_NOTE, NO_STAMPS, name_stamp_ns
 
 
 def test_a_folder_reads_in_natural_order(tmp_path: Path, small: list[np.ndarray]) -> None:
@@ -164,7 +164,9 @@ def test_16_bit_and_alpha_images_come_out_8_bit(tmp_path: Path,
                       np.full(small[1].shape, 7, np.uint8)])
     cv2.imwrite(str(tmp_path / "a_1.png"), wide)
     cv2.imwrite(str(tmp_path / "a_2.png"), bgra)
-    got = list(open_source(tmp_path).frames())
+    source = open_source(tmp_path)
+    got = list(source.frames())
+    assert DEEP_NOTE in source.info.notes
     np.testing.assert_array_equal(got[0].image, small[0])
     assert got[1].image.shape == (120, 188, 3)
     np.testing.assert_array_equal(got[1].image[..., 1], small[1])
@@ -174,3 +176,14 @@ def test_a_range_after_the_last_image(tmp_path: Path, small: list[np.ndarray]) -
     write_image_folder(tmp_path, small)
     with pytest.raises(SourceError, match=r"has 5 frames; --frames 7: starts after the last"):
         open_source(tmp_path, frames=FrameRange(7))
+
+
+def test_a_deep_image_later_in_the_folder_is_noted_while_reading(
+        tmp_path: Path, small: list[np.ndarray]) -> None:
+    write_image_folder(tmp_path, small[:1], names=["a_1.png"])
+    cv2.imwrite(str(tmp_path / "a_2.png"), small[1].astype(np.uint16) * 257)
+    source = open_source(tmp_path)
+    assert DEEP_NOTE not in source.info.notes
+    got = list(source.frames())
+    np.testing.assert_array_equal(got[1].image, small[1])
+    assert source.notes == [DEEP_NOTE]
