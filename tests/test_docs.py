@@ -45,6 +45,36 @@ def test_every_readme_python_snippet_runs_as_written(index: int, tmp_path: Path)
     assert done.returncode == 0, f"README snippet {index}:\n{code}\n{done.stderr[-3000:]}"
 
 
+def _command_lines() -> list[tuple[str, str]]:
+    """Every ``tfalda-sim …`` line of the README's and docs' shell blocks (a ``$`` prompt,
+    a trailing comment and backslash continuations taken off), with its file."""
+    out = []
+    for path in [README, *sorted((ROOT / "docs").glob("*.md"))]:
+        for block in re.findall(r"^```(?:sh|console|bash)\n(.*?)^```", path.read_text(),
+                                flags=re.S | re.M):
+            text = block.replace("\\\n", " ")
+            for line in text.splitlines():
+                line = line.removeprefix("$ ").strip()
+                # a synopsis ([optional], a|b, …) or a shell loop's $var is not a command
+                if line.startswith("tfalda-sim ") and not re.search(r"[\[|<…$]|\.\.\.", line):
+                    out.append((path.name, line))
+    return out
+
+
+@pytest.mark.parametrize("where, line", _command_lines())
+def test_every_documented_command_line_parses(where: str, line: str) -> None:
+    """Options renamed or dropped show here, not in a user's terminal."""
+    import shlex
+
+    from tfalda_sim.cli import build_parser
+
+    argv = shlex.split(line, comments=True)[1:]
+    try:
+        build_parser().parse_args(argv)
+    except SystemExit as exc:
+        pytest.fail(f"{where}: `{line}` does not parse (exit {exc.code})")
+
+
 def test_changelog_keeps_a_changelog_form() -> None:
     text = (ROOT / "CHANGELOG.md").read_text()
     assert text.startswith("# Changelog")

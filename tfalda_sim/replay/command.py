@@ -129,10 +129,11 @@ def cmd_replay(args: argparse.Namespace) -> int:
         print(json_text(result))
         return code
     topic = f" {result['topic']}" if result["topic"] else ""
+    loops = result["loops_completed"]
     recorded = (f"recorded at {result['recording_rate_hz']:.3g} frames/s"
                 if result["recording_rate_hz"] else "no recorded frame rate")
     print(f"{result['source']} ({result['kind']}{topic}, {recorded}): {result['frames']} "
-          f"frames, {result['loops_completed']} loops ({result['stopped']}), processed at "
+          f"frames, {loops} loop{'' if loops == 1 else 's'} ({result['stopped']}), processed at "
           f"{result['frames_per_s'] or 0:.0f} frames/s, detector "
           f"{result['detector_ms_median'] or 0:.2f} ms/frame")
     what = "segments" if args.detector == Detector.HOUGH.value else "lanes"
