@@ -91,7 +91,7 @@ class McapSource(StreamSource):
             self._stamp0 = 0
             first, stamps, logged = self._first(reader)
         info_topic = camera_info_topic(chosen.name, topics)
-        cam = self._camera_info(info_topic) if info_topic else None
+        cam, cam_note = self._optional_camera_info(info_topic)
         msgtype, msg = first
         label = encoding_label(msgtype, msg)
         try:
@@ -100,7 +100,7 @@ class McapSource(StreamSource):
             image = image_of(msgtype, msg)
         except DecodeError as exc:
             raise SourceError(f"{path}: topic {chosen.name}, frame 0: {exc}") from None
-        notes = [n for n in [encoding_note(label)] if n]
+        notes = [n for n in [encoding_note(label), cam_note] if n]
         if not self._indexed:
             notes.append("the file has no index: frames in file order")
         if logged:
@@ -248,6 +248,17 @@ class McapSource(StreamSource):
     def _stamp_of(msg: Any, log_ns: int) -> int:
         stamp = stamp_ns(msg)
         return stamp if stamp != 0 else log_ns
+
+    def _optional_camera_info(self, topic: Topic | None
+                              ) -> tuple[CameraInfo | None, str | None]:
+        """The camera_info (None without one) and, when its message does not decode, a
+        note saying so: the frames are read without it."""
+        if topic is None:
+            return None, None
+        try:
+            return self._camera_info(topic), None
+        except SourceError as exc:
+            return None, f"camera_info not used: {exc}"
 
     def _camera_info(self, topic: Topic) -> CameraInfo | None:
         """The first message of the camera_info topic as a ``CameraInfo``."""

@@ -107,7 +107,7 @@ class RosBagSource(StreamSource):
             self.topic = chosen
             self._stamp0 = 0
             first, stamps, logged = self._first(reader, chosen)
-            cam = self._camera_info(reader, info_topic) if info_topic else None
+            cam, cam_note = self._optional_camera_info(reader, info_topic)
         finally:
             with contextlib.suppress(Exception):
                 reader.close()
@@ -119,7 +119,7 @@ class RosBagSource(StreamSource):
             image = image_of(msgtype, msg)
         except DecodeError as exc:
             raise SourceError(f"{path}: topic {chosen.name}, frame 0: {exc}") from None
-        notes = [n for n in [encoding_note(label)] if n]
+        notes = [n for n in [encoding_note(label), cam_note] if n]
         if logged:
             notes.append(f"{logged} of the first {len(stamps)} frames have no header stamp: "
                          "time stamps from the log (receive) times there")
@@ -239,6 +239,17 @@ class RosBagSource(StreamSource):
     def _stamp_of(msg: Any, log_ns: int) -> int:
         stamp = stamp_ns(msg)
         return stamp if stamp != 0 else log_ns
+
+    def _optional_camera_info(self, reader: Reader, topic: Topic | None
+                              ) -> tuple[CameraInfo | None, str | None]:
+        """The camera_info (None without one) and, when its message does not decode, a
+        note saying so: the frames are read without it."""
+        if topic is None:
+            return None, None
+        try:
+            return self._camera_info(reader, topic), None
+        except SourceError as exc:
+            return None, f"camera_info not used: {exc}"
 
     def _camera_info(self, reader: Reader, topic: Topic) -> CameraInfo | None:
         """The first message of the camera_info topic as a ``CameraInfo``."""

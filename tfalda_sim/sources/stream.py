@@ -9,6 +9,7 @@ that frame into ``(t_s, image)`` and is called only for frames inside the range.
 from __future__ import annotations
 
 import math
+import re
 from collections import Counter
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -29,8 +30,7 @@ a robust median, few enough that opening a long recording stays quick."""
 def reason(exc: BaseException) -> str:
     """A library's exception as a short clause (its own advice to report it dropped)."""
     text = " ".join(str(exc).split()) or type(exc).__name__
-    for tail in ("; please report issue.", "; please report issue"):
-        text = text.removesuffix(tail)
+    text = re.sub(r";\s*please report\b.*$", "", text)
     return text.rstrip(".")[:300]
 
 

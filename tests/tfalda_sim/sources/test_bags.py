@@ -35,6 +35,7 @@ from tfalda_sim.sources import (
     ros,
     to_grey,
 )
+from tfalda_sim.sources.decode import DecodeError
 
 KINDS = ["ros1", "ros2-sqlite3", "ros2-mcap", "mcap"]
 ROS2_KINDS = ["ros2-sqlite3", "ros2-mcap"]
@@ -486,3 +487,22 @@ def test_frames_of_a_changing_size_are_resized_and_counted(tmp_path: Path,
                             "1 frame of 376×240 resized to 188×120"]
     list(source.frames())  # counts per pass, not summed over passes
     assert source.notes[0].startswith("2 frames")
+
+
+
+@pytest.mark.parametrize("kind", ["ros1", "mcap"])
+def test_a_camera_info_that_does_not_decode_is_noted_and_left_out(
+        kind: str, tmp_path: Path, small: list[np.ndarray], stamps: list[int],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    written = CameraInfo(188, 120, np.eye(3), np.zeros(5), "plumb_bob")
+    path = record(kind, tmp_path, small, stamps, camera_info=written)
+
+    def broken(msg: Any) -> CameraInfo:
+        raise DecodeError("CameraInfo K has 4 values, not 9")
+
+    monkeypatch.setattr(ros if kind == "ros1" else mcap_file, "camera_info", broken)
+    source = open_source(path)
+    assert source.info.camera_info is None
+    assert any(n.startswith("camera_info not used: ") and "K has 4 values" in n
+               for n in source.info.notes)
+    assert len(list(source.frames())) == 5
