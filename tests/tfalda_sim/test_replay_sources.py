@@ -247,6 +247,12 @@ def test_a_replay_recorded_replays_to_the_same_lanes(option: str, frames: list[n
     second = tfalda("replay", out, "--detector", "tfalda", "--per-frame", "b.jsonl", "--json",
                     cwd=tmp_path).json()
     assert second["frames"] == 2 * FRAMES
+    # our recordings carry the camera's calibration: its own profile says nothing, another
+    # is said, with what to do
+    assert second["camera_info_note"] is None
+    other = tfalda("replay", out, "--detector", "tfalda", "--camera", "reference-car",
+                   "--json", cwd=tmp_path).json()
+    assert "is not the camera profile's" in other["camera_info_note"]
     assert second["recording_rate_hz"] == pytest.approx(RATE_HZ)
     a = [json.loads(x) for x in (tmp_path / "a.jsonl").read_text().splitlines()]
     b = [json.loads(x) for x in (tmp_path / "b.jsonl").read_text().splitlines()]

@@ -143,8 +143,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
              else ""))
     if result["conversions"]:
         print("converted: " + ", ".join(result["conversions"]))
-    if result["rate_note"]:
-        print(f"note: {result['rate_note']}")
+    for key in ("rate_note", "camera_info_note"):
+        if result[key]:
+            print(f"note: {result[key]}")
     for key in ("out", "per_frame", "recording"):
         if result[key]:
             print(f"wrote {result[key]}")

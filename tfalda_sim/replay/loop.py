@@ -179,6 +179,21 @@ def _recorded(t_s: float, frame: np.ndarray, result: HoughResult | LaneObservati
                         roi_reset=bool(result.roi_reset), state=result.state.value)
 
 
+def camera_info_note(info: SourceInfo, camera: Camera) -> str | None:
+    """The line saying that the recording's camera_info is not the camera profile's
+    calibration (None when it has none, or the same size and K)."""
+    ci = info.camera_info
+    if ci is None:
+        return None
+    if (ci.width_px, ci.height_px) == (camera.width, camera.height) and np.allclose(
+            np.asarray(ci.K, np.float64).reshape(3, 3), camera.K, rtol=1e-6, atol=1e-6):
+        return None
+    return (f"the recording's camera_info ({ci.width_px}×{ci.height_px} px, focal "
+            f"{float(np.asarray(ci.K).ravel()[0]):.1f} px) is not the camera profile's "
+            f"({camera.width}×{camera.height} px, {float(camera.K[0, 0]):.1f} px): "
+            "`tfalda-sim camera fit` on the recording writes a profile with it, for --camera")
+
+
 def rate_note(recording_hz: float | None, camera_hz: float) -> str | None:
     """The line saying that the recording's frame rate is not the camera profile's, or
     None when they agree (within ``RATE_MISMATCH``) or the recording has none."""
@@ -319,6 +334,7 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
         "recording_rate_hz": info.rate_hz,
         "camera_rate_hz": camera_hz,
         "rate_note": note,
+        "camera_info_note": camera_info_note(info, cam),
         "frames_per_s": n / wall if wall > 0 else None,
         "detector_ms_median": times.median_ms(),  # to 0.01 ms (binned)
         "detections_per_frame": detections / n if n else None,
