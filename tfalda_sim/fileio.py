@@ -20,6 +20,7 @@ import hashlib
 import os
 import re
 import secrets
+import shutil
 import socket
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -126,9 +127,10 @@ def _alive(pid: int) -> bool:
 
 
 def remove_stale_temps(folder: str | os.PathLike[str]) -> list[Path]:
-    """Remove the temporary files in ``folder`` that a process of this host left when it
-    was killed (its pid no longer runs); the paths removed. Best effort: a file that
-    cannot be removed, or a folder that cannot be listed, is left alone."""
+    """Remove the temporary files and folders (a ROS 2 bag being written is a folder) in
+    ``folder`` that a process of this host left when it was killed (its pid no longer
+    runs); the paths removed. Best effort: what cannot be removed, or a folder that
+    cannot be listed, is left alone."""
     removed = []
     try:
         entries = list(os.scandir(folder))
@@ -144,6 +146,9 @@ def remove_stale_temps(folder: str | os.PathLike[str]) -> list[Path]:
         try:
             if entry.is_file(follow_symlinks=False):
                 os.unlink(entry.path)
+                removed.append(Path(entry.path))
+            elif entry.is_dir(follow_symlinks=False):
+                shutil.rmtree(entry.path)
                 removed.append(Path(entry.path))
         except OSError:
             pass

@@ -25,7 +25,6 @@ from __future__ import annotations
 import contextlib
 import enum
 import os
-import re
 import shutil
 import time
 from pathlib import Path
@@ -34,10 +33,10 @@ from typing import IO
 
 from tfalda_sim import __version__
 from tfalda_sim.fileio import (
-    TEMP_PREFIX,
     WriteError,
     create_temp,
     publish,
+    remove_stale_temps,
     stage,
     temp_path,
     unstage,
@@ -72,49 +71,6 @@ class RecordingFormat(enum.Enum):
 
     MCAP = "mcap"
     ROSBAG = "rosbag"
-
-
-_TEMP_NAME = re.compile(re.escape(TEMP_PREFIX) + r"(\d+)\.([0-9a-f]+)\.[0-9a-f]+\.tmp\Z")
-
-
-def _host_tag() -> str:
-    """This host's tag in temporary names (``fileio.temp_path``: PREFIX PID.HOST.RANDOM)."""
-    m = _TEMP_NAME.match(temp_path(".").name)
-    assert m is not None, temp_path(".").name
-    return m.group(2)
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # another user's process
-        return True
-    except OverflowError:
-        return False
-    return True
-
-
-def remove_stale_bag_folders(folder: Path) -> list[Path]:
-    """Remove the temporary folders of bags in ``folder`` that a process of this host left
-    when it was killed (``fileio.remove_stale_temps`` does the same for files); the
-    folders removed. Best effort."""
-    removed: list[Path] = []
-    try:
-        entries = list(os.scandir(folder))
-    except OSError:
-        return removed
-    host = _host_tag()
-    for entry in entries:
-        m = _TEMP_NAME.match(entry.name)
-        if m is None or m.group(2) != host or int(m.group(1)) == os.getpid():
-            continue
-        if _pid_alive(int(m.group(1))) or not entry.is_dir(follow_symlinks=False):
-            continue
-        shutil.rmtree(entry.path, ignore_errors=True)
-        removed.append(Path(entry.path))
-    return removed
 
 
 def _check_bag_target(path: Path) -> None:
@@ -199,7 +155,7 @@ class Recorder:
 
     def _open_bag(self) -> BagSink:
         _check_bag_target(self.path)
-        remove_stale_bag_folders(self.path.parent)
+        remove_stale_temps(self.path.parent)
         self._tmp = temp_path(self.path.parent)
         self._tmp.mkdir(mode=0o700)
         self._stage(self._tmp)

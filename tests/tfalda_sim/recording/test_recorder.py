@@ -26,7 +26,7 @@ from tests.tfalda_sim.recording.readback import (
     steps,
 )
 from tfalda_sim import __version__
-from tfalda_sim.fileio import TEMP_PREFIX, temp_path
+from tfalda_sim.fileio import TEMP_PREFIX, remove_stale_temps, temp_path
 from tfalda_sim.recording import (
     CAMERA_TOPIC,
     CUSTOM_DATA_KEY,
@@ -35,7 +35,6 @@ from tfalda_sim.recording import (
     RecordingFormat,
 )
 from tfalda_sim.recording.channels import CHANNELS
-from tfalda_sim.recording.writer import remove_stale_bag_folders
 
 START_NS = 1_700_000_000_123_456_789
 """The runs' start in most tests [ns since the Unix epoch]: stamps to compare exactly."""
@@ -360,7 +359,7 @@ def test_a_killed_runs_bag_folder_is_removed_by_the_next(tmp_path: Path) -> None
     (stale / "run" / "run.mcap").write_bytes(b"x" * 100)
     mine = temp_path(tmp_path)
     mine.mkdir()  # this process' own: a recording in progress
-    assert remove_stale_bag_folders(tmp_path) == [stale]
+    assert remove_stale_temps(tmp_path) == [stale]
     assert not stale.exists() and mine.is_dir()
 
 
