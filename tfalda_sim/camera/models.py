@@ -225,11 +225,16 @@ class FisheyeCamera(Camera):
         theta_d = np.hypot(xd, yd)
         k1, k2, k3, k4 = self.D
         theta = theta_d.copy()
+        # Newton's method; it stops once no step changes θ any more (then every further
+        # step would be 0 too): at once for the equidistant lens (D = 0, θ = θ_d).
         for _ in range(20):
             t2 = theta * theta
             f = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)))) - theta_d
             df = 1 + t2 * (3 * k1 + t2 * (5 * k2 + t2 * (7 * k3 + t2 * 9 * k4)))
-            theta = theta - f / df
+            step = f / df
+            if not np.any(step):
+                break
+            theta = theta - step
         with np.errstate(invalid="ignore", divide="ignore"):
             s = np.where(theta_d > 1e-12, np.sin(theta) / np.where(theta_d > 1e-12, theta_d, 1), 1)
         return np.column_stack([xd * s, yd * s, np.cos(theta)])
