@@ -1,5 +1,5 @@
-"""Video files: MP4 recording of frame sequences (H.264 through ffmpeg, which browsers play)
-and reading a recording back as the camera's grey 752×480 frames (``VideoReader``).
+"""Video files: MP4 recording of frame sequences (H.264 through ffmpeg, which browsers play);
+reading any recording back is ``tfalda_sim.sources``'.
 
 ``VideoWriter`` streams the frames through a pipe to imageio-ffmpeg's bundled ffmpeg
 (``libx264``, ``yuv420p``, the index at the file's start), so memory stays bounded however
@@ -19,7 +19,6 @@ import signal
 import subprocess
 import sys
 import threading
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
@@ -317,123 +316,6 @@ class VideoWriter:
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
         self.close(keep=exc_type is None)
-
-
-class VideoError(ValueError):
-    """A video file that cannot be read: not a video, or a codec this OpenCV cannot decode."""
-
-
-_REENCODE = "re-encode it, e.g. `ffmpeg -i IN -c:v mpeg4 -q:v 2 OUT.mp4`"
-
-
-@dataclass(frozen=True)
-class VideoInfo:
-    """What a video file holds (as OpenCV reports it)."""
-
-    width_px: int
-    height_px: int
-    fps: float
-    """Frame rate the file declares [1/s] (0 when it declares none)."""
-    frame_count: int
-    """Frames the container declares (an estimate for some formats)."""
-    codec: str
-    """FOURCC of the video stream, e.g. ``mp4v``."""
-    colour: bool
-    """The first frame has three or four channels that differ (judged on that frame)."""
-
-
-class VideoReader:
-    """Read a video file as uint8 grey frames of ``size`` = (width, height) [px].
-
-    Colour frames are converted to grey and frames of another size are resized
-    (``INTER_AREA``); ``conversions`` says which happened. Opening checks that the file
-    exists, is a video OpenCV can open, and that its first frame decodes, so a missing
-    file, a file that is not a video and an unknown codec fail here with a
-    ``FileNotFoundError`` / ``VideoError`` that says what to do."""
-
-    def __init__(self, path: str | os.PathLike[str], *, size: tuple[int, int] = (752, 480)
-                 ) -> None:
-        self.path = Path(path)
-        self.size = (int(size[0]), int(size[1]))
-        if not self.path.exists():
-            raise FileNotFoundError(f"no video file {self.path}")
-        if not self.path.is_file():
-            raise VideoError(f"{self.path} is not a file; give a video file (.mp4, .avi, …)")
-        cap = self._open()
-        try:
-            ok, first = cap.read()
-            fourcc = int(cap.get(cv2.CAP_PROP_FOURCC))
-            codec = "".join(chr((fourcc >> (8 * k)) & 0xFF) for k in range(4)).strip("\x00 ")
-            if not ok or first is None:
-                raise VideoError(
-                    f"{self.path}: no frame decodes (codec {codec or 'unknown'!r}, which this "
-                    f"OpenCV build cannot decode, or the file is cut short); {_REENCODE}")
-            self.info = VideoInfo(
-                width_px=first.shape[1], height_px=first.shape[0],
-                fps=float(cap.get(cv2.CAP_PROP_FPS) or 0.0),
-                frame_count=max(0, int(cap.get(cv2.CAP_PROP_FRAME_COUNT))), codec=codec,
-                colour=first.ndim == 3 and first.shape[2] in (3, 4)
-                and not is_grey(first))
-        finally:
-            cap.release()
-        self.passes_completed = 0
-        self.conversions: list[str] = []
-        if self.info.colour:
-            self.conversions.append("colour → grey")
-        if (self.info.width_px, self.info.height_px) != self.size:
-            self.conversions.append(f"{self.info.width_px}×{self.info.height_px} → "
-                                    f"{self.size[0]}×{self.size[1]} px")
-            if abs(self.info.width_px / self.info.height_px - self.size[0] / self.size[1]) \
-                    > 0.01:
-                self.conversions.append("aspect ratio changed")
-
-    def _open(self) -> cv2.VideoCapture:
-        cap = cv2.VideoCapture(str(self.path))
-        if not cap.isOpened():
-            cap.release()
-            raise VideoError(f"cannot open {self.path}: not a video, or a container or codec "
-                             f"this OpenCV build cannot decode; {_REENCODE}")
-        return cap
-
-    def convert(self, frame: np.ndarray) -> np.ndarray:
-        """One decoded frame as grey uint8 of ``size``."""
-        if frame.ndim == 3:
-            code = cv2.COLOR_BGRA2GRAY if frame.shape[2] == 4 else cv2.COLOR_BGR2GRAY
-            frame = cv2.cvtColor(frame, code) if frame.shape[2] != 1 else frame[..., 0]
-        if frame.dtype != np.uint8:  # 16-bit video: keep the top byte
-            frame = (frame >> 8).astype(np.uint8) if frame.dtype == np.uint16 else \
-                cv2.convertScaleAbs(frame)
-        if (frame.shape[1], frame.shape[0]) != self.size:
-            frame = cv2.resize(frame, self.size, interpolation=cv2.INTER_AREA)
-        return np.ascontiguousarray(frame)
-
-    def frames(self) -> Iterator[np.ndarray]:
-        """One pass over the file, converted frames."""
-        cap = self._open()
-        try:
-            while True:
-                ok, frame = cap.read()
-                if not ok or frame is None:
-                    return
-                yield self.convert(frame)
-        finally:
-            cap.release()
-
-    def loop(self, loops: int | None = None) -> Iterator[tuple[int, np.ndarray]]:
-        """``(loop, frame)`` over ``loops`` passes (``None``: endlessly), the file read
-        again from its start after its last frame; ``passes_completed`` counts the passes
-        read to their end."""
-        if loops is not None and loops < 1:
-            raise ValueError(f"loops must be ≥ 1 or None (endless), got {loops}")
-        self.passes_completed = 0
-        while loops is None or self.passes_completed < loops:
-            empty = True
-            for frame in self.frames():
-                empty = False
-                yield self.passes_completed, frame
-            if empty:
-                raise VideoError(f"{self.path}: a pass over the file gave no frame")
-            self.passes_completed += 1
 
 
 GREY_TOLERANCE_DN: int = 3

@@ -34,10 +34,13 @@ def test_drive_reports_laps_as_json_and_writes_a_video(tmp_path: Path,
     cap = cv2.VideoCapture(str(video))
     assert cap.isOpened() and cap.get(cv2.CAP_PROP_FRAME_COUNT) == summary["steps"]
     # The camera video holds the bare grey frames, for the replay.
-    from tfalda_sim.video import VideoReader
+    from tfalda_sim.sources import open_source
 
-    reader = VideoReader(camera)
-    assert reader.info.frame_count == summary["steps"] and not reader.info.colour
+    first = next(open_source(camera).frames()).image
+    assert open_source(camera).info.frame_count == summary["steps"]
+    from tfalda_sim.video import is_grey
+
+    assert first.ndim == 2 or is_grey(first)  # the bare grey frames
     assert summary["camera_video"] == str(camera)
     # An existing video is not overwritten without --force.
     code, _, err = run(capsys, "drive", "--track", "oval", "--video", str(video))

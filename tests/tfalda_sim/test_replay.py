@@ -1,4 +1,5 @@
-"""Reading recordings back (VideoReader) and the endless-loop replay (tfalda-sim replay)."""
+"""The endless-loop replay of videos (tfalda-sim replay); other sources:
+test_replay_sources.py."""
 
 from __future__ import annotations
 
@@ -21,7 +22,8 @@ from tfalda_sim import replay as replay_module
 from tfalda_sim.cli import main
 from tfalda_sim.perception import HoughDetector
 from tfalda_sim.replay import Detector, replay
-from tfalda_sim.video import VideoError, VideoReader, VideoWriter
+from tfalda_sim.sources import SourceError, open_source, to_grey
+from tfalda_sim.video import VideoWriter
 
 FRAMES = 6
 
@@ -38,6 +40,11 @@ def _road(k: int, size: tuple[int, int] = (752, 480), colour: bool = False) -> n
     return img
 
 
+def _grey_frames(path: Path, size: tuple[int, int] = (752, 480)) -> list[np.ndarray]:
+    """A video's frames as grey frames of ``size`` (as replay reads them)."""
+    return [to_grey(f.image, size) for f in open_source(path).frames()]
+
+
 def _write(path: Path, n: int = FRAMES, **kw) -> Path:
     with VideoWriter(path, 25.0) as writer:
         for k in range(n):
@@ -50,49 +57,37 @@ def video(tmp_path: Path) -> Path:
     return _write(tmp_path / "drive.mp4")
 
 
-def test_the_reader_gives_grey_camera_frames_in_order(video: Path) -> None:
-    reader = VideoReader(video)
-    frames = list(reader.frames())
-    assert len(frames) == FRAMES and reader.conversions == []
+def test_a_video_source_gives_the_frames_in_order(video: Path) -> None:
+    source = open_source(video)
+    frames = [to_grey(f.image, (752, 480)) for f in source.frames()]
+    assert len(frames) == FRAMES and source.info.kind == "video"
     assert all(f.shape == (480, 752) and f.dtype == np.uint8 for f in frames)
-    assert reader.info.fps == pytest.approx(25.0) and not reader.info.colour
+    assert source.info.rate_hz == pytest.approx(25.0)
     # The lines move right by a pixel a frame: the frames come back in order.
     cols = [int(np.argmax(f[465, 400:] > 150)) for f in frames]
     assert cols == sorted(cols) and cols[-1] > cols[0]
-
-
-def test_the_loop_reads_the_file_again_after_its_last_frame(video: Path) -> None:
-    reader = VideoReader(video)
-    got = list(reader.loop(3))
-    assert [loop for loop, _ in got] == [0] * FRAMES + [1] * FRAMES + [2] * FRAMES
-    assert np.array_equal(got[0][1], got[FRAMES][1])
-    with pytest.raises(ValueError, match="loops"):
-        next(reader.loop(0))
+    again = [to_grey(f.image, (752, 480)) for f in source.frames()]  # another pass
+    assert all(np.array_equal(a, b) for a, b in zip(frames, again, strict=True))
 
 
 def test_colour_and_other_sizes_are_converted(tmp_path: Path) -> None:
     path = _write(tmp_path / "small.mp4", size=(376, 240), colour=True)
-    reader = VideoReader(path)
-    assert reader.info.colour and (reader.info.width_px, reader.info.height_px) == (376, 240)
-    assert reader.conversions == ["colour → grey", "376×240 → 752×480 px"]
-    frame = next(reader.frames())
-    assert frame.shape == (480, 752) and frame.ndim == 2
     result = replay(path, Detector.HOUGH, loops=1)
     assert result["frames"] == FRAMES and result["detections_per_frame"] >= 2
-    assert result["conversions"] == reader.conversions
-    wide = VideoReader(_write(tmp_path / "wide.mp4", size=(640, 240)))
-    assert "aspect ratio changed" in wide.conversions
+    assert result["source_size_px"] == [376, 240]
+    assert result["conversions"] == ["colour → grey", "376×240 → 752×480 px"]
+    wide = replay(_write(tmp_path / "wide.mp4", size=(640, 240)), Detector.HOUGH)
+    assert "aspect ratio changed" in wide["conversions"]
+    assert "colour → grey" not in wide["conversions"]
 
 
 def test_unreadable_files_get_a_clear_error(tmp_path: Path) -> None:
-    with pytest.raises(FileNotFoundError, match="no video file"):
-        VideoReader(tmp_path / "missing.mp4")
-    with pytest.raises(VideoError, match="not a file"):
-        VideoReader(tmp_path)
+    with pytest.raises(SourceError, match="no such file"):
+        replay(tmp_path / "missing.mp4", Detector.HOUGH)
     text = tmp_path / "notes.mp4"
     text.write_text("not a video")
-    with pytest.raises(VideoError, match=r"not a video.*re-encode"):
-        VideoReader(text)
+    with pytest.raises(SourceError):
+        replay(text, Detector.HOUGH)
     # A real AVI whose codec no decoder knows (its FOURCC rewritten).
     avi = tmp_path / "mj.avi"
     writer = cv2.VideoWriter(str(avi), cv2.VideoWriter_fourcc(*"MJPG"), 25, (64, 48))
@@ -101,12 +96,12 @@ def test_unreadable_files_get_a_clear_error(tmp_path: Path) -> None:
     writer.release()
     unknown = tmp_path / "unknown.avi"
     unknown.write_bytes(avi.read_bytes().replace(b"MJPG", b"QQQQ"))
-    with pytest.raises(VideoError, match="codec"):
-        VideoReader(unknown)
+    with pytest.raises(SourceError, match="re-encode"):
+        replay(unknown, Detector.HOUGH)
     cut = tmp_path / "cut.mp4"
     cut.write_bytes(_write(tmp_path / "whole.mp4").read_bytes()[:2000])
-    with pytest.raises(VideoError, match="re-encode"):
-        VideoReader(cut)
+    with pytest.raises(SourceError, match="re-encode"):
+        replay(cut, Detector.HOUGH)
 
 
 @pytest.fixture(scope="module")
@@ -133,7 +128,7 @@ def test_replay_runs_n_loops_and_annotates(camera_video: Path, tmp_path: Path,
     assert result["stopped"] == "loops" and result["detector_ms_median"] > 0
     # Both lines of the ego lane (Hough: segments; TFALDA: lanes the LIS kept).
     assert result["detections_per_frame"] >= (2 if detector is Detector.HOUGH else 3)
-    annotated = list(VideoReader(out).frames())
+    annotated = _grey_frames(out)
     assert len(annotated) == 3 * FRAMES
     if detector is Detector.HOUGH:  # the red segments drawn on the grey frame
         bgr = next(iter(cv2.VideoCapture(str(out)).read()[1:]))
@@ -167,7 +162,7 @@ def test_ctrl_c_stops_cleanly_and_keeps_the_annotated_video(
     assert result["stopped"] == "interrupted"
     assert result["frames"] == frames and result["loops_completed"] == loops
     if frames:
-        assert len(list(VideoReader(out).frames())) == frames
+        assert len(_grey_frames(out)) == frames
     else:
         assert not out.exists() and list(tmp_path.glob(".partial*")) == []
 
@@ -244,9 +239,9 @@ def test_stages_writes_the_seeds_2x2_view(video: Path, tmp_path: Path, capsys) -
     out = tmp_path / "stages.mp4"
     assert main(["replay", str(video), "--detector", "hough", "--out", str(out),
                  "--stages", "--json"]) == 0
-    reader = VideoReader(out, size=(1504, 518))
-    assert (reader.info.width_px, reader.info.height_px) == (1504, 518)
-    assert len(list(reader.frames())) == FRAMES
+    source = open_source(out)
+    assert (source.info.width_px, source.info.height_px) == (1504, 518)
+    assert len(list(source.frames())) == FRAMES
     capsys.readouterr()
     for bad in (["--detector", "tfalda", "--out", str(tmp_path / "t.mp4")],
                 ["--detector", "hough"]):
@@ -278,8 +273,8 @@ def test_max_frames_bounds_forever_and_its_video(video: Path, tmp_path: Path) ->
     result = run.json()
     assert result["frames"] == 15 and result["stopped"] == "max_frames"
     assert result["loops_completed"] == 15 // FRAMES and result["out"] == str(out)
-    reader = VideoReader(out)
-    assert reader.info.codec == "h264" and sum(1 for _ in reader.frames()) == 15
+    source = open_source(out)
+    assert source.info.encoding == "h264" and sum(1 for _ in source.frames()) == 15
     assert "--max-frames" not in run.err  # bounded: no note about the growth
     # With --loops, whichever comes first.
     assert tfalda("replay", video, "--detector", "tfalda", "--loops", "5", "--max-frames", "7",

@@ -19,8 +19,9 @@ from tfalda_sim import video
 from tfalda_sim.perception import TfaldaDetector
 from tfalda_sim.rendering import Renderer, build_scene, frame_truth
 from tfalda_sim.rendering.overlay import LANE_BGR, draw_observation
+from tfalda_sim.sources import open_source
 from tfalda_sim.tracks import load_named
-from tfalda_sim.video import VideoReader, VideoWriter
+from tfalda_sim.video import VideoWriter
 
 
 def test_frames_round_trip_through_an_mp4(tmp_path: Path) -> None:
@@ -122,8 +123,8 @@ def test_videos_are_h264_and_every_frame_reads_back(tmp_path: Path, size: tuple[
     assert cap.get(cv2.CAP_PROP_FPS) == pytest.approx(12.5)
     assert cap.read()[1].shape[:2] == (size[1] + size[1] % 2, size[0] + size[0] % 2)
     cap.release()
-    reader = VideoReader(path, size=(64, 48))
-    assert reader.info.codec == "h264" and sum(1 for _ in reader.frames()) == 37
+    source = open_source(path)
+    assert source.info.encoding == "h264" and sum(1 for _ in source.frames()) == 37
 
 
 @pytest.mark.parametrize("ffmpeg", [False, True], ids=["no ffmpeg", "ffmpeg without x264"])

@@ -23,7 +23,6 @@ from ..cli_common import (
 from ..fileio import WriteError
 from ..perception.command import check_camera_geometry
 from ..sources import FrameRange, SourceError
-from ..video import VideoError
 from .loop import OUT_BYTES_PER_FRAME, Detector, HoughPreset, replay
 
 _GROWTH = (f"≈ {OUT_BYTES_PER_FRAME[0] / 1000:g}–{OUT_BYTES_PER_FRAME[1] / 1000:g} kB a frame, "
@@ -119,7 +118,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
                         rate_hz=args.rate, per_frame=args.per_frame, mcap=args.mcap,
                         rosbag=args.rosbag)
         result["camera"] = args.camera
-    except (FileNotFoundError, VideoError, SourceError, WriteError) as exc:
+    except (FileNotFoundError, SourceError, WriteError) as exc:
         raise CliError(str(exc)) from None
     except OSError as exc:
         raise CliError(f"cannot write {args.out}: {exc.strerror or exc}") from None

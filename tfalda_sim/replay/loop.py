@@ -133,7 +133,7 @@ is said: the LIS's filters and the ROI rules count frames, not seconds [1]."""
 
 def _conversions(info: SourceInfo, first: np.ndarray, size: tuple[int, int]) -> list[str]:
     """What turning the source's frames into the camera's grey ``size`` does, judged on
-    the first frame (as ``video.VideoReader`` does)."""
+    the first frame."""
     out: list[str] = []
     if first.ndim == 3 and first.shape[2] in (3, 4) and not is_grey(first):
         out.append("colour → grey")

@@ -116,7 +116,8 @@ class FrameSource(Protocol):
 
 def to_grey(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """A decoded frame as contiguous grey uint8 of ``size`` = (width, height) [px]: colour
-    to grey, then ``INTER_AREA`` resizing (as ``video.VideoReader``)."""
+    to grey, then ``INTER_AREA`` resizing (the detectors see the same frame from every
+    source)."""
     if image.ndim == 3:
         if image.shape[2] == 1:
             image = image[..., 0]

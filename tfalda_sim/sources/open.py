@@ -25,6 +25,10 @@ SQLITE_MAGIC = b"SQLite format 3\x00"
 
 _GLOB_CHARS = frozenset("*?[")
 
+VIDEO_SUFFIXES = frozenset({".mp4", ".m4v", ".mov", ".avi", ".mkv", ".webm", ".mpg", ".mpeg",
+                            ".wmv", ".flv", ".ts", ".h264", ".mjpeg"})
+"""Names of video files: one that does not open is a video OpenCV cannot decode."""
+
 
 def _magic(path: Path) -> bytes:
     try:
@@ -91,6 +95,10 @@ def open_source(path: str | Path, *, topic: str | None = None,
     if opens_as_video(p):
         _no_topics(p, "a video", topic)
         return VideoSource(p, frames=frames, rate_hz=rate_hz)
+    if suffix in VIDEO_SUFFIXES:  # named as a video: its codec or container is the problem
+        raise SourceError(f"cannot open {p}: not a video, or a container or codec this "
+                          "OpenCV build cannot decode; re-encode it, e.g. `ffmpeg -i IN -c:v "
+                          "mpeg4 -q:v 2 OUT.mp4`")
     raise SourceError(f"{p}: not a kind of recording this reads; give {KINDS}")
 
 
