@@ -147,3 +147,34 @@ def test_an_existing_recording_needs_force(tmp_path: Path) -> None:
     run = tfalda("drive", "--track", "oval", "--laps", "1", "--mcap", "d.mcap", cwd=tmp_path,
                  code=2)
     assert "--force" in run.err and (tmp_path / "d.mcap").read_bytes() == b"old"
+
+
+def test_ctrl_c_keeps_the_recording_of_the_frames_driven(tmp_path: Path,
+                                                         monkeypatch: pytest.MonkeyPatch
+                                                         ) -> None:
+    from tfalda_sim.envs import TfaldaTrackEnv
+
+    real, steps = TfaldaTrackEnv.step, []
+
+    def ctrl_c_at_eleventh(self: TfaldaTrackEnv, action: np.ndarray):
+        steps.append(1)
+        if len(steps) == 11:
+            raise KeyboardInterrupt
+        return real(self, action)
+
+    monkeypatch.setattr(TfaldaTrackEnv, "step", ctrl_c_at_eleventh)
+    path = tmp_path / "cut.mcap"
+    old = tmp_path / "old.mcap"
+    result = drive(make_agent("pid"), load_named("oval"), laps=1, mcap=path)
+    assert result.ended == "interrupted" and result.steps == 10
+    counts, _, _ = read_mcap(path)
+    assert counts["/camera/image/compressed"] == 11  # the start and the ten steps
+    # an error (not a Ctrl-C) leaves an existing recording as it was
+    old.write_bytes(b"keep")
+    steps.clear()
+    monkeypatch.setattr(TfaldaTrackEnv, "step", lambda self, a: (_ for _ in ()).throw(
+        RuntimeError("a broken env")))
+    with pytest.raises(RuntimeError, match="broken"):
+        drive(make_agent("pid"), load_named("oval"), laps=1, mcap=old)
+    assert old.read_bytes() == b"keep"
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
