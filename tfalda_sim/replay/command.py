@@ -14,7 +14,6 @@ from ..cli_common import (
     add_force_option,
     add_json_option,
     add_recording_options,
-    bounded_float_arg,
     check_outputs,
     json_text,
     positive_int_arg,
@@ -22,7 +21,8 @@ from ..cli_common import (
 )
 from ..fileio import WriteError
 from ..perception.command import check_camera_geometry
-from ..sources import FrameRange, SourceError
+from ..sources import SourceError
+from ..sources.command import add_source_options
 from .loop import OUT_BYTES_PER_FRAME, Detector, HoughPreset, replay
 
 _GROWTH = (f"≈ {OUT_BYTES_PER_FRAME[0] / 1000:g}–{OUT_BYTES_PER_FRAME[1] / 1000:g} kB a frame, "
@@ -71,27 +71,6 @@ def register(sub: Any) -> None:
     add_force_option(rp, "an existing --out")
     add_json_option(rp)
     rp.set_defaults(func=cmd_replay)
-
-
-def frame_range_arg(text: str) -> FrameRange:
-    """``--frames A:B``."""
-    try:
-        return FrameRange.parse(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def add_source_options(parser: argparse.ArgumentParser) -> None:
-    """``--topic``, ``--frames`` and ``--rate``: which frames of a recording to read."""
-    parser.add_argument("--topic", help="the image topic of a ROS bag or MCAP file (default: "
-                                        "its only image topic, or the one it names as its "
-                                        "camera)")
-    parser.add_argument("--frames", type=frame_range_arg, metavar="A:B",
-                        help="frames A to B−1 of the recording, counted from 0 (A: or :B "
-                             "too)")
-    parser.add_argument("--rate", type=bounded_float_arg(0.1, 1000.0, "1/s"), metavar="HZ",
-                        help="an image folder's frame rate [1/s] (its time stamps; default: "
-                             "from the file names, if they hold them)")
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
