@@ -150,6 +150,25 @@ def test_replay_out_on_a_full_disk(small: SmallDisk) -> None:
     _assert_refused(small, run, target)
 
 
+@pytest.mark.parametrize("option", ["--mcap", "--per-frame"])
+def test_replay_recording_and_per_frame_lines_on_a_full_disk(small: SmallDisk,
+                                                             option: str) -> None:
+    source = noise_video(small.cwd / "noise.mp4")
+    target = _existing(small, "rp.mcap" if option == "--mcap" else "rp.jsonl")
+    run = small.run("replay", source, "--detector", "hough", "--loops", "20", option, target,
+                    "--force", room=VIDEO_LIMIT if option == "--mcap" else 4096,
+                    warm=option == "--per-frame")
+    _assert_refused(small, run, target)
+
+
+def test_drive_mcap_on_a_full_disk(small: SmallDisk) -> None:
+    target = _existing(small, "d.mcap")
+    run = small.run("drive", "--track", "oval", "--laps", "1", "--mcap", target, "--force",
+                    room=VIDEO_LIMIT)
+    _assert_refused(small, run, target)
+    assert "wrote" not in run.out
+
+
 def test_evaluate_video_on_a_full_disk(small: SmallDisk) -> None:
     """evaluate writes the video to its staged name first: the error still names --video."""
     target = _existing(small, "e.mp4")
