@@ -141,6 +141,56 @@ def perception_body(r: Mapping) -> str:
                  rows)
 
 
+REPLAY_MODES: tuple[tuple[str, str], ...] = (("read", "read alone"),
+                                             ("tfalda", "TFALDA + LIS replay"),
+                                             ("hough", "Hough replay"))
+"""bench_replay's turns of a source kind (its JSON's keys) and their columns' names."""
+
+
+def replay_body(r: Mapping) -> str:
+    kinds = r["kinds"]
+    header = ["source kind", "`open_source` kind", "MB a frame", "opening [ms]"]
+    for _, label in REPLAY_MODES:
+        header += [f"{label} [frames/s]", "× MP4"]
+    rows = []
+    for name, k in kinds.items():
+        row = [name, f"`{k['source_kind']}`", num(k["mb_per_frame"], 3), num(k["open_ms"], 1)]
+        for mode, _ in REPLAY_MODES:
+            row += [num(k[mode]["frames_per_s"], 0), ratio(k[mode]["ratio_to_mp4"])]
+        rows.append(row)
+    rec = r["recording"]
+    without, with_mcap = rec["without"], rec["with_mcap"]
+    drives = table([f"drive, {rec['track']}, PID, {rec['drive_steps']} steps", "ms a step",
+                    "steps/s", "cost × without"],
+                   [["without a recording", num(without["ms_per_step"], 3),
+                     num(without["steps_per_s"], 0), ratio(1.0)],
+                    ["`--mcap FILE`", num(with_mcap["ms_per_step"], 3),
+                     num(with_mcap["steps_per_s"], 0), ratio(rec["cost_ratio"])]])
+    reference = r["reference"]
+    pairs = {name: f"{num(k['tfalda']['detections_per_frame'])} / "
+                   f"{num(k['hough']['detections_per_frame'])}" for name, k in kinds.items()}
+    others = {pair for name, pair in pairs.items() if name != reference}
+    if len(others) == 1:
+        detections = (f"{others.pop()} from every other kind (their frames are the rendered "
+                      f"ones exactly), {pairs[reference]} from the MP4 (H.264 is lossy)")
+    else:
+        detections = "; ".join(f"{name}: {pair}" for name, pair in pairs.items())
+    return "\n".join([
+        table(header, rows, "ll" + "r" * (len(header) - 2)),
+        "",
+        wrap(f"{r['frames']} frames of {r['frame_size_px'][0]}×{r['frame_size_px'][1]} px "
+             f"a recording; medians of {r['rounds']} rounds, each ratio the median of its "
+             "rounds' ratios. Detections a frame (TFALDA's lanes / Hough's segments): "
+             f"{detections}."),
+        "",
+        drives,
+        "",
+        wrap(f"The drive's MCAP: {num(rec['mb_per_frame'], 3)} MB a frame "
+             f"({rec['frames_recorded']} frames a drive of {rec['drive_steps']} steps: the "
+             "start's and one a step)."),
+    ])
+
+
 def reset_body(r: Mapping) -> str:
     resets = r["reset"]
     eager = resets["new track, eager scene"]["median_ms"]
@@ -267,6 +317,22 @@ BENCHMARKS: tuple[Benchmark, ...] = (
         ("--frames", "2000"),
         lambda r: f"--frames {next(iter(r['presets'].values()))['frames']}",
         perception_body),
+    Benchmark(
+        "bench_replay", "Replay: recordings as frame sources, and recording a drive",
+        "The camera frames of a PID drive on the oval (rendered once, noise included), "
+        "written untimed as every kind of recording `tfalda-sim replay` reads: an MP4 "
+        "(H.264, as `drive --camera-video` writes it: the previous replay's only input, the "
+        "same-run reference), a PNG folder, ROS 1 and ROS 2 (sqlite3) bags of "
+        "`sensor_msgs/Image` mono8, a ROS 2 bag in MCAP storage of `CompressedImage` PNG, a "
+        "plain MCAP file of Image mono8. In rounds, on one core, each kind is read alone "
+        "(`open_source(…).frames()` + `to_grey`, its opening clocked apart) and replayed "
+        "through each detector (`replay`'s own `frames_per_s`: first frame to last). Then "
+        "the cost of recording: drives of the oval, `drive(…, max_steps=…)` without and with "
+        "`mcap=` in turns, the recorder's closing inside the drive's clock.",
+        ("--frames", "300", "--rounds", "5", "--drive-steps", "300"),
+        lambda r: (f"--frames {r['frames']} --rounds {r['rounds']} "
+                   f"--drive-steps {r['recording']['drive_steps']}"),
+        replay_body),
     Benchmark(
         "bench_candidates", "TFALDA's candidate search kernel",
         "The detector's candidate search on the pre-processed ROIs of rendered frames, one "

@@ -72,6 +72,7 @@ SMALL_ARGS: dict[str, tuple[str, ...]] = {
     "bench_reset": ("--resets", "3"),
     "bench_render": ("--frames", "10"),
     "bench_perception": ("--frames", "10"),
+    "bench_replay": ("--frames", "10", "--rounds", "2", "--drive-steps", "10"),
     "bench_candidates": ("--rois", "24", "--repeat", "1"),
     "bench_tracks": ("--seeds", "5", "--raster-seeds", "2"),
 }
@@ -221,6 +222,80 @@ def test_bench_reset_times_lazy_eager_and_fixed_track_resets() -> None:
     for name, r in result["reset"].items():
         assert r["resets"] == 3 and 0 < r["median_ms"] <= r["max_ms"], name
     assert result["eager_over_lazy"] > 0
+
+
+REPLAY_KINDS: dict[str, str] = {
+    "MP4 video (reference)": "video",
+    "image folder, PNG": "images",
+    "ROS 1 bag, Image mono8": "ros1",
+    "ROS 2 bag (sqlite3), Image mono8": "ros2-sqlite3",
+    "ROS 2 bag (MCAP storage), CompressedImage PNG": "ros2-mcap",
+    "MCAP file, Image mono8": "mcap",
+}
+"""bench_replay's source kinds and the kind ``open_source`` finds each to be."""
+
+
+def test_bench_replay_reads_and_replays_every_kind_against_the_mp4() -> None:
+    """Every kind of recording is read alone and replayed through both detectors, each
+    figure with its ratio to the MP4's; the lossless kinds give the detectors the same
+    frames, so the same detections; a drive recorded to MCAP records the start's frame and
+    one a step."""
+    result = run_json("bench_replay.py", *SMALL_ARGS["bench_replay"])
+    assert (result["frames"], result["rounds"], result["frame_size_px"]) == (10, 2, [752, 480])
+    assert result["reference"] == "MP4 video (reference)"
+    kinds = result["kinds"]
+    assert list(kinds) == list(REPLAY_KINDS)  # the table's order: the reference first
+    for name, k in kinds.items():
+        assert k["source_kind"] == REPLAY_KINDS[name]
+        assert k["mb_per_frame"] > 0 and k["open_ms"] > 0
+        for mode in ("read", "tfalda", "hough"):
+            assert k[mode]["frames_per_s"] > 0 and k[mode]["ratio_to_mp4"] > 0, (name, mode)
+        for detector in ("tfalda", "hough"):
+            assert k[detector]["detector_ms_median"] > 0
+            assert k[detector]["detections_per_frame"] > 0
+    for mode in ("read", "tfalda", "hough"):  # every round's ratio of the MP4 to itself
+        assert kinds["MP4 video (reference)"][mode]["ratio_to_mp4"] == 1.0
+    lossless = [k for name, k in kinds.items() if name != "MP4 video (reference)"]
+    for detector in ("tfalda", "hough"):
+        assert len({k[detector]["detections_per_frame"] for k in lossless}) == 1, detector
+    assert kinds["ROS 1 bag, Image mono8"]["encoding"] == "mono8"
+    rec = result["recording"]
+    assert (rec["track"], rec["drive_steps"], rec["frames_recorded"]) == ("oval", 10, 11)
+    assert rec["mb_per_frame"] > 0 and rec["cost_ratio"] > 0
+    for key in ("without", "with_mcap"):
+        assert rec[key]["ms_per_step"] == pytest.approx(1000 / rec[key]["steps_per_s"])
+    assert result["machine"]["pinned_to_one_core"] and result["machine"]["cores"] >= 1
+    # The printed table: the machine, the header, a row per kind with its figures in the
+    # same columns however long its name, then the drives.
+    sys.path.insert(0, str(BENCHMARKS))
+    try:
+        import bench_replay
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+    lines = bench_replay.table(result).splitlines()
+    assert result["machine"]["cpu"] in lines[0] and "medians of 2 rounds" in lines[0]
+    rows = lines[2:2 + len(kinds)]
+    assert [row.split("  ", 1)[0] for row in rows] == list(kinds)
+    assert len({len(row) for row in rows}) == 1
+    png = kinds["image folder, PNG"]
+    assert rows[1].split()[-6:] == [
+        cell for mode in ("read", "tfalda", "hough")
+        for cell in (f"{png[mode]['frames_per_s']:.0f}", f"{png[mode]['ratio_to_mp4']:.2f}×")]
+    assert lines[-1].startswith("drive on oval, 10 steps a drive")
+    assert f"{rec['cost_ratio']:.2f}×" in lines[-1]
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (("--frames", "0"), "--frames must be ≥ 1"),
+    (("--rounds", "0"), "--rounds must be ≥ 1"),
+    (("--frames", "3001"), "--frames must be ≤ 3000"),
+    (("--drive-steps", "20001"), "--drive-steps must be ≤ 20000"),
+    (("--drive-steps", "many"), "invalid int value"),
+])
+def test_bench_replay_names_bad_arguments(args: tuple[str, ...], message: str) -> None:
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "bench_replay.py"), *args],
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert done.returncode == 2 and message in done.stderr and "Traceback" not in done.stderr
 
 
 @pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="bench_ab needs two cores")
