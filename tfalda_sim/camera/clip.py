@@ -10,9 +10,10 @@ what stays the same across the frames that remain:
   frames agreeing, is refused naming the parameter.
 - **yaw**: a frame's fitted yaw is the mount's yaw plus the car's heading on the road at
   that moment (both turn the camera about the same vertical axis). The mount's yaw is
-  the median over the frames: the assumption is that the car's heading averages out —
-  a car that stays in its lane cannot head off to one side for long (its lateral
-  position would drift by ∫ v·sin(heading) dt). The heading's spread is reported.
+  the mean over the clip's time of the agreeing frames' yaws (``time_weights``): the
+  assumption is that the car's heading averages out — a car that stays in its lane
+  cannot head off to one side for long (its lateral position would drift by
+  ∫ v·sin(heading) dt). The heading's spread is reported.
 - **lateral offset**: a frame's fitted offset is where the camera is in the lane: the
   car's position plus the mount's offset, which no clip of a driving car can tell
   apart. The mount's lateral offset is not fitted from a clip: it is ``lateral_m``
@@ -244,9 +245,22 @@ def combine(results: list[FrameResult], camera: Camera, *, lateral_m: float = 0.
             raise _disagreement([r for r, a in zip(use, agree, strict=True) if a], kept,
                                 (name,), limits, "spread")
     med = {name: float(np.median([x[name] for x in kept])) for name in
-           ("pitch", "roll", "height", "yaw")}
+           ("pitch", "roll", "height")}
     if not roll_fitted:
         med["roll"] = 0.0
+    # Every fitted frame's road direction (two lines suffice) under the clip's pitch and
+    # roll: its yaw, if the direction lies on the clip's horizon.
+    band = CLIP_OUTLIER_SPREADS * limits["pitch"]
+    yaws: dict[int, float] = {}
+    for r in fitted:
+        assert r.fit is not None
+        yaw, off_horizon = yaw_on_horizon(r.fit.camera.mount.rotation()[:, 0], med["pitch"],
+                                          med["roll"])
+        if abs(off_horizon) <= band:
+            yaws[id(r)] = yaw
+    timed = [r for r in fitted if id(r) in yaws]
+    weights = time_weights([r.t_s for r in timed])
+    med["yaw"] = float(np.sum(weights * np.array([yaws[id(r)] for r in timed])))
     try:
         check_fitted_mount(med["height"], med["pitch"], med["roll"], med["yaw"])
         mount = CameraMount(height_m=med["height"], forward_m=camera.mount.forward_m,
@@ -288,7 +302,7 @@ def combine(results: list[FrameResult], camera: Camera, *, lateral_m: float = 0.
         "pitch_deg": Spread.of(math.degrees(x["pitch"]) for x in kept),
         "roll_deg": Spread.of(math.degrees(x["roll"]) for x in kept),
         "height_m": Spread.of(x["height"] for x in kept),
-        "heading_deg": Spread.of(math.degrees(x["yaw"] - med["yaw"]) for x in kept),
+        "heading_deg": Spread.of(math.degrees(yaws[id(r)] - med["yaw"]) for r in timed),
         "car_offset_m": Spread.of(x["offset"] - lateral_m for x in kept),
         "residual_px": Spread.of(r.fit.residual_px for r in agreeing if r.fit is not None),
     }
@@ -299,6 +313,37 @@ def combine(results: list[FrameResult], camera: Camera, *, lateral_m: float = 0.
         notes.append("roll not fitted: too few frames show three lines; taken as 0")
     return ClipFit(result_camera, roll_fitted, residual, spreads, tuple(frames_out),
                    best[1], best[2], lane_width_m, tuple(notes))
+
+
+def yaw_on_horizon(direction: np.ndarray, pitch_rad: float, roll_rad: float
+                   ) -> tuple[float, float]:
+    """(yaw, elevation) [rad] of a road ``direction`` (camera frame) for a camera pitched
+    ``pitch_rad`` and rolled ``roll_rad``: the yaw that turns the camera's view onto it
+    (the mount's yaw plus the car's heading), and how far above the camera's horizon it
+    lies (0 for a road on the ground the camera's pitch and roll describe)."""
+    cp, sp = math.cos(pitch_rad), math.sin(pitch_rad)
+    cr, sr = math.cos(roll_rad), math.sin(roll_rad)
+    pitch = np.array([[1.0, 0.0, 0.0], [0.0, cp, -sp], [0.0, sp, cp]])
+    roll = np.array([[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]])
+    u = pitch.T @ roll.T @ (direction / np.linalg.norm(direction))
+    return math.atan2(u[0], u[2]), -math.asin(max(-1.0, min(1.0, float(u[1]))))
+
+
+def time_weights(times_s: list[float]) -> np.ndarray:
+    """Weights (sum 1) of frames at ``times_s`` [s] for a mean over the clip's time: each
+    frame stands for the time from halfway to its previous frame to halfway to its next
+    (the end frames for as long as their one neighbour's half interval, twice), so frames
+    left out (curves, refused) do not tilt the mean toward their neighbours' side; equal
+    weights when the times do not increase (no time stamps)."""
+    t = np.asarray(times_s, dtype=np.float64)
+    n = len(t)
+    if n < 3 or not np.all(np.isfinite(t)) or not np.all(np.diff(t) > 0):
+        return np.full(n, 1.0 / max(n, 1))
+    gaps = np.diff(t)
+    w = np.empty(n)
+    w[1:-1] = 0.5 * (gaps[:-1] + gaps[1:])
+    w[0], w[-1] = gaps[0], gaps[-1]
+    return w / w.sum()
 
 
 def _inlier_px(camera: Camera) -> float:
@@ -411,4 +456,4 @@ def _spread_order(n: int) -> list[int]:
 
 
 __all__ = ["ClipFit", "ClipFitError", "ClipFrame", "FrameResult", "LineFit", "Spread",
-           "clip_focal", "combine", "fit_clip", "frame_fits", "sample_frames"]
+           "clip_focal", "combine", "fit_clip", "frame_fits", "sample_frames", "time_weights"]

@@ -81,6 +81,10 @@ BODY_MARGIN_SHARE: float = 0.005
 """Marking pixels this close above the car's body are left out too [share of the image
 height]: the top-hat's response spills a few pixels past a bright body edge."""
 
+MAX_LINE_SHARE_ON_BODY: float = 0.5
+"""A fitted line with more than this share of its pixels on the car's body is refused
+[1]: a marking ends at the body's edge, it does not run over it."""
+
 VANISHING_TOLERANCE_RAD: float = math.radians(1.0)
 """Lines are parallel on the ground when their great circles pass within this angle of a
 common vanishing point [rad]."""
@@ -97,6 +101,10 @@ DASHED_COVERAGE_RELATIVE: tuple[float, float] = (0.9, 0.1)
 """…or less than the first share when that is the second below every other line's [1]:
 far dashes, their gaps below a bin, fill more of a line seen at a slant (a car heading
 off the lane's direction)."""
+
+LANE_WIDTH_FIT_RANGE_M: tuple[float, float] = (0.1, 1.0)
+"""Lane widths (line centre to line centre) the fit takes [m]: a model car's track, from
+a quarter to two and a half times the Carolo-Cup's 0.4 m."""
 
 FOCAL_RANGE: tuple[float, float] = (0.25, 0.75)
 """``--fit-focal`` searches the equidistant focal length in this range × the image
@@ -317,8 +325,9 @@ def _check_frame(frame: np.ndarray, camera: Camera) -> None:
 
 
 def _check_lane_width(lane_width_m: float) -> None:
-    if not (math.isfinite(lane_width_m) and 0.05 <= lane_width_m <= 2.0):
-        raise MountFitError(f"the lane width must be 0.05–2 m, got {lane_width_m}")
+    lo, hi = LANE_WIDTH_FIT_RANGE_M
+    if not (math.isfinite(lane_width_m) and lo <= lane_width_m <= hi):
+        raise MountFitError(f"the lane width must be {lo:g}–{hi:g} m, got {lane_width_m}")
 
 
 def fit_mount(frame: np.ndarray, camera: Camera, *, points: list[np.ndarray] | None = None,
@@ -538,6 +547,23 @@ def _finish(camera: Camera, fits: list[LineFit], direction: np.ndarray,
     if lateral_m is not None:
         fitted = fitted.with_mount(lateral_m=lateral_m)
     return MountFit(fitted, tuple(fits), residual, roll_fitted, f_px, lane_width_m)
+
+
+def lines_off_body(lines: tuple[LineFit, ...], body: np.ndarray) -> None:
+    """Refuse (``MountFitError``) a fit whose used line lies mostly on the car's body
+    (``body``: ``(H, W)`` bool), more than ``MAX_LINE_SHARE_ON_BODY`` of its pixels."""
+    h, w = body.shape
+    for line in lines:
+        if line.role == "other" or not len(line.pixels):
+            continue
+        cols = np.clip(np.rint(line.pixels[:, 0]).astype(np.int64), 0, w - 1)
+        rows = np.clip(np.rint(line.pixels[:, 1]).astype(np.int64), 0, h - 1)
+        share = float(np.mean(body[rows, cols]))
+        if share > MAX_LINE_SHARE_ON_BODY:
+            raise MountFitError(f"the {line.role} line lies on the car's body ({share:.0%} of "
+                                "its pixels): the lines found are not the road's markings; "
+                                "outline the body (--bonnet FILE)", lines=lines,
+                                parameter="body")
 
 
 def model_line_pixels(camera: Camera, centre_y_car: float, offset_m: float,

@@ -547,6 +547,22 @@ def _ros_intrinsics(path: Path, data: dict, lens: LensModel | None) -> Intrinsic
                        _integer(path, "image_height", data["image_height"]))
 
 
+def intrinsics_from_camera_info(where: str, width: int, height: int, K: np.ndarray,
+                                D: np.ndarray, distortion_model: str) -> Intrinsics:
+    """The intrinsics of a recording's ``camera_info`` (``where`` names it in errors):
+    ROS's ``equidistant`` is a fisheye, ``plumb_bob`` a pinhole; checked as a calibration
+    file is (``CameraFileError``)."""
+    ros = {"equidistant": LensModel.FISHEYE, "plumb_bob": LensModel.PINHOLE}
+    if distortion_model not in ros:
+        raise CameraFileError(f"{where}: distortion_model {distortion_model!r} is not "
+                              "supported (known: equidistant, plumb_bob); give --intrinsics")
+    K = np.asarray(K, dtype=np.float64).reshape(3, 3)
+    D = np.asarray(D, dtype=np.float64).ravel()
+    if ros[distortion_model] is LensModel.PINHOLE and len(D) < 5:
+        D = np.concatenate([D, np.zeros(5 - len(D))])  # ROS may leave trailing zeros out
+    return _intrinsics(Path(where), ros[distortion_model], K, D, int(width), int(height))
+
+
 def _read(path: Path, lens: LensModel | None) -> tuple[str, Any]:
     """('profile', Camera) or ('intrinsics', Intrinsics)."""
     text = _read_text(path)
