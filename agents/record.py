@@ -18,8 +18,8 @@ import numpy as np
 
 from tfalda_sim.camera.ros_info import camera_info_of
 from tfalda_sim.envs import TfaldaTrackEnv
-from tfalda_sim.recording import RecordedStep, Recorder, RecordingFormat
-from tfalda_sim.rendering.truth import frame_truth
+from tfalda_sim.recording import RecordedStep, Recorder, RecordingFormat, polyline_segments
+from tfalda_sim.rendering.truth import ego_boundaries
 
 
 def run_recorder(mcap: Path | None, rosbag: Path | None, source: str
@@ -33,14 +33,6 @@ def run_recorder(mcap: Path | None, rosbag: Path | None, source: str
         return RunRecorder(mcap, RecordingFormat.MCAP, source)
     assert rosbag is not None
     return RunRecorder(rosbag, RecordingFormat.ROSBAG, source)
-
-
-def _segments(polyline: np.ndarray) -> np.ndarray:
-    """(N, 2) pixels → (N − 1, 4) segments, NaN points dropped."""
-    pts = polyline[np.all(np.isfinite(polyline), axis=1)]
-    if len(pts) < 2:
-        return np.zeros((0, 4))
-    return np.hstack([pts[:-1], pts[1:]]).astype(np.float64)
 
 
 class RunRecorder:
@@ -71,8 +63,8 @@ class RunRecorder:
             t_s = self._offset_s + frame.step / rate
         self._last_t_s = t_s
         obs = frame.lanes
-        t = frame_truth(env.track, env.camera, frame.camera_pose)
-        truth = np.vstack([_segments(t.left_boundary_px), _segments(t.right_boundary_px)])
+        left, right = ego_boundaries(env.track, env.camera, frame.camera_pose)
+        truth = np.vstack([polyline_segments(left), polyline_segments(right)])
         finite = np.all(np.isfinite(obs.lanes), axis=1)
         self.recorder.write(RecordedStep(
             t_s=t_s, frame=env.camera_frame(),

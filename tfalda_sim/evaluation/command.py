@@ -528,13 +528,9 @@ def _recording_hook(recorder: Any, label: str, scenario: Any) -> Any:
     """Each frame of ``label``'s run into ``recorder``: the frame, lanes, LIS state, the
     ground truth (the ego lane's boundaries, the cross-track error from the right lane's
     centre, left > 0) and the scripted car's pose and speed."""
-    from ..recording import RecordedStep
+    from ..recording import RecordedStep, polyline_segments
 
     traj, track = scenario.trajectory, scenario.track
-
-    def segments(polyline: np.ndarray) -> np.ndarray:
-        pts = polyline[np.all(np.isfinite(polyline), axis=1)]
-        return (np.hstack([pts[:-1], pts[1:]]) if len(pts) >= 2 else np.zeros((0, 4)))
 
     def hook(seq: int, frame: np.ndarray, truth: FrameTruth,
              observations: Mapping[str, LaneObservation]) -> None:
@@ -548,8 +544,8 @@ def _recording_hook(recorder: Any, label: str, scenario: Any) -> Any:
             accepted=np.all(np.isfinite(obs.lanes), axis=1) & ~obs.replaced, rois=obs.rois,
             fault_counter=int(obs.fault_count), roi_reset=bool(obs.roi_reset),
             state=obs.state.value, pose=(x, y, yaw), speed_m_s=float(traj.speeds_m_s[k]),
-            truth_lanes=np.vstack([segments(truth.left_boundary_px),
-                                   segments(truth.right_boundary_px)]),
+            truth_lanes=np.vstack([polyline_segments(truth.left_boundary_px),
+                                   polyline_segments(truth.right_boundary_px)]),
             cross_track_m=lateral + 0.5 * track.lane_width_m))
 
     return hook

@@ -8,7 +8,7 @@ and bag folder), ``writer`` (the recorder: temporary files, errors, interrupts).
 """
 
 from tfalda_sim.recording.channels import CHANNELS, Channel
-from tfalda_sim.recording.step import RecordedStep
+from tfalda_sim.recording.step import RecordedStep, polyline_segments
 from tfalda_sim.recording.writer import (
     CAMERA_TOPIC,
     CUSTOM_DATA_KEY,
@@ -18,4 +18,4 @@ from tfalda_sim.recording.writer import (
 )
 
 __all__ = ["CAMERA_TOPIC", "CHANNELS", "CUSTOM_DATA_KEY", "METADATA_NAME", "Channel",
-           "RecordedStep", "Recorder", "RecordingFormat"]
+           "RecordedStep", "Recorder", "RecordingFormat", "polyline_segments"]

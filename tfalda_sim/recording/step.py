@@ -11,10 +11,30 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 LANE_COUNT = 4
 """Lanes (and regions of interest) per frame: TFALDA's four lane lines."""
+
+POLYLINE_TOLERANCE_PX = 0.5
+"""How far a recorded polyline may stray from the line it stands for [px]: half a pixel is
+invisible over the image, and a marking's polyline sampled every 2 cm on the ground shrinks
+from ≈ 150 points to a handful."""
+
+
+def polyline_segments(points: np.ndarray,
+                      tolerance_px: float = POLYLINE_TOLERANCE_PX) -> np.ndarray:
+    """An ``(N, 2)`` pixel polyline (NaN points dropped) as ``(k, 4)`` segments for
+    ``RecordedStep.truth_lanes``, simplified to within ``tolerance_px`` (Douglas–Peucker,
+    OpenCV's ``approxPolyDP``)."""
+    pts = np.asarray(points, np.float64)
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    if len(pts) < 2:
+        return np.zeros((0, 4))
+    simple = cv2.approxPolyDP(pts.astype(np.float32).reshape(-1, 1, 2), tolerance_px,
+                              False).reshape(-1, 2).astype(np.float64)
+    return np.hstack([simple[:-1], simple[1:]])
 
 
 _KINDS = {"f": "float", "i": "int", "u": "unsigned int", "b": "bool"}

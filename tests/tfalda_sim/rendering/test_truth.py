@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from tests.conftest import generated
+from tfalda_sim.camera import load_camera
 from tfalda_sim.rendering import Effects, Renderer, build_scene, frame_truth
 from tfalda_sim.tracks import Marking, load_named
 
@@ -81,3 +82,16 @@ def test_intersection_stop_lines_and_obstacles_in_truth(renderer: Renderer) -> N
     ob = track.obstacles[0]
     truth = frame_truth(track, renderer.camera, pose_on(track, ob.s_m - 1.0))
     assert (truth.labels == Marking.OBSTACLE).sum() > 100
+
+
+def test_the_ego_boundaries_alone_are_frame_truths() -> None:
+    from tfalda_sim.rendering.truth import ego_boundaries
+
+    track = load_named("oval")
+    camera = load_camera("reference-car")
+    for pose in ((0.5, -0.2, 0.0), (3.0, -0.25, 0.1)):
+        truth = frame_truth(track, camera, pose)
+        left, right = ego_boundaries(track, camera, pose)
+        np.testing.assert_array_equal(left, truth.left_boundary_px)
+        np.testing.assert_array_equal(right, truth.right_boundary_px)
+        assert len(left) > 10
