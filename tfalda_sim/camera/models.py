@@ -225,16 +225,19 @@ class FisheyeCamera(Camera):
         theta_d = np.hypot(xd, yd)
         k1, k2, k3, k4 = self.D
         theta = theta_d.copy()
-        # Newton's method; it stops once no step changes θ any more (then every further
-        # step would be 0 too): at once for the equidistant lens (D = 0, θ = θ_d).
+        # Newton's method, per pixel until its step is 0 (then every further step would be
+        # 0 too, so leaving it out changes nothing): at once for the equidistant lens.
+        act = np.arange(len(theta))
         for _ in range(20):
-            t2 = theta * theta
-            f = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)))) - theta_d
+            th, td = theta[act], theta_d[act]
+            t2 = th * th
+            f = th * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)))) - td
             df = 1 + t2 * (3 * k1 + t2 * (5 * k2 + t2 * (7 * k3 + t2 * 9 * k4)))
             step = f / df
-            if not np.any(step):
+            theta[act] = th - step
+            act = act[step != 0]
+            if not len(act):
                 break
-            theta = theta - step
         with np.errstate(invalid="ignore", divide="ignore"):
             s = np.where(theta_d > 1e-12, np.sin(theta) / np.where(theta_d > 1e-12, theta_d, 1), 1)
         return np.column_stack([xd * s, yd * s, np.cos(theta)])
@@ -289,20 +292,29 @@ class PinholeCamera(Camera):
         yd = (uv[:, 1] - K[1, 2]) / K[1, 1]
         x, y = cv2.undistortPoints(uv.reshape(-1, 1, 2), K, self.D).reshape(-1, 2).T.copy()
         k1, k2, p1, p2, k3 = self.D
+        # Newton's method, per pixel until its step is 0 (then every further step would be
+        # 0 too, so leaving it out changes nothing).
+        act = np.arange(len(x))
         for _ in range(8):
-            r2 = x * x + y * y
+            xa, ya, xda, yda = x[act], y[act], xd[act], yd[act]
+            r2 = xa * xa + ya * ya
             radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
             dradial = k1 + r2 * (2 * k2 + r2 * 3 * k3)  # d radial / d r2
-            fx = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x) - xd
-            fy = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y - yd
-            j11 = radial + 2 * x * x * dradial + 2 * p1 * y + 6 * p2 * x
-            j12 = 2 * x * y * dradial + 2 * p1 * x + 2 * p2 * y
-            j21 = 2 * x * y * dradial + 2 * p1 * x + 2 * p2 * y
-            j22 = radial + 2 * y * y * dradial + 6 * p1 * y + 2 * p2 * x
+            fx = xa * radial + 2 * p1 * xa * ya + p2 * (r2 + 2 * xa * xa) - xda
+            fy = ya * radial + p1 * (r2 + 2 * ya * ya) + 2 * p2 * xa * ya - yda
+            j11 = radial + 2 * xa * xa * dradial + 2 * p1 * ya + 6 * p2 * xa
+            j12 = 2 * xa * ya * dradial + 2 * p1 * xa + 2 * p2 * ya
+            j21 = 2 * xa * ya * dradial + 2 * p1 * xa + 2 * p2 * ya
+            j22 = radial + 2 * ya * ya * dradial + 6 * p1 * ya + 2 * p2 * xa
             det = j11 * j22 - j12 * j21
             with np.errstate(divide="ignore", invalid="ignore"):
-                x = x - (j22 * fx - j12 * fy) / det
-                y = y - (j11 * fy - j21 * fx) / det
+                step_x = (j22 * fx - j12 * fy) / det
+                step_y = (j11 * fy - j21 * fx) / det
+                x[act] = xa - step_x
+                y[act] = ya - step_y
+            act = act[(step_x != 0) | (step_y != 0)]
+            if not len(act):
+                break
         rays = np.column_stack([x, y, np.ones(len(x))])
         rays /= np.linalg.norm(rays, axis=1, keepdims=True)
         # Beyond the distortion polynomial's turning point no ray maps to the pixel:

@@ -5,7 +5,8 @@ Two kinds of body, found across the clip's frames and joined (per column the hig
 
 - **bright structures that stay put** — cables, a print, screws: the marking search's
   own bright narrow structures (``fit.marking_mask``), found at the same place (within a
-  shake) in most frames while the road's markings move past. Only those wholly in the
+  shake) in most frames while the road moves (its markings move past, or the frames
+  change elsewhere: the hall, the mat's border). Only those wholly in the
   image's lower half count (a body over more hides the road; a solid road line that
   happens to stay put reaches up to the horizon).
 - **a dark bonnet's edge** — the single-frame detector (``fit.detect_bonnet``) run on
@@ -45,6 +46,15 @@ MIN_MOVING_SHARE: float = 0.2
 [1]: else the road did not move in the clip (a parked car), and what stays put is road
 as well as body."""
 
+MOTION_DN: int = 30
+"""A pixel changes between the clip's frames when its grey level spans more than this
+[DN of 255]: ten times a camera's noise, a marking or an edge passing."""
+
+MIN_MOTION_SHARE: float = 0.02
+"""…and the clip moves when at least this share of its pixels change [1] (the hall's
+edges, the mat's border, markings), even with no bright structure moving (an empty
+road)."""
+
 EDGE_AGREEMENT_PX: float = 3.0
 """A dark body's edge found in two frames is the same edge when its rows agree within
 this [px on a 480-row frame, scaled with the height]: the detector's blur."""
@@ -75,9 +85,13 @@ def _static_structures(frames: list[np.ndarray], marking_width_px: int
     if not ever.any():
         return None, "no bright structures in the clip"
     moving = float(np.mean(~stays[ever]))
-    if moving < MIN_MOVING_SHARE:
-        return None, (f"only {moving:.0%} of the clip's bright structures move: the road does "
-                      "not move in it (a parked car?), so what stays put is not only the car")
+    lo = np.minimum.reduce(frames)
+    hi = np.maximum.reduce(frames)
+    changing = float(np.mean((hi.astype(np.int16) - lo) > MOTION_DN))
+    if moving < MIN_MOVING_SHARE and changing < MIN_MOTION_SHARE:
+        return None, (f"only {moving:.0%} of the clip's bright structures and {changing:.1%} "
+                      "of its pixels change: the road does not move in it (a parked car?), "
+                      "so what stays put is not only the car")
     body = (stays & ever).astype(np.uint8)
     if not body.any():
         return None, "nothing bright stays put"
