@@ -523,6 +523,8 @@ def _finish(camera: Camera, fits: list[LineFit], direction: np.ndarray,
     # Camera-frame images of the car's axes → the mount's rotation (car → camera).
     R = np.column_stack([direction, e_lat, g])
     pitch, roll, yaw = _rot_to_angles(R @ _BASE.T)
+    if not roll_fitted:
+        roll = 0.0  # taken as 0, not the rotation's rounding of it
     h, y0 = float(h), float(y0)
     fitted_lateral = -(y0 - lane_width_m / 2)  # camera left of the lane centre
     forward = camera.mount.forward_m if forward_m is None else forward_m
