@@ -9,11 +9,13 @@ what stays the same across the frames that remain:
   beyond ``plausible.CLIP_TOLERANCES``, or fewer than ``MIN_CLIP_AGREEMENT`` of the
   frames agreeing, is refused naming the parameter.
 - **yaw**: a frame's fitted yaw is the mount's yaw plus the car's heading on the road at
-  that moment (both turn the camera about the same vertical axis). The mount's yaw is
-  the mean over the clip's time of the agreeing frames' yaws (``time_weights``): the
-  assumption is that the car's heading averages out — a car that stays in its lane
-  cannot head off to one side for long (its lateral position would drift by
-  ∫ v·sin(heading) dt). The heading's spread is reported.
+  that moment (both turn the camera about the same vertical axis). Every fitted frame's
+  road direction (two lines suffice) gives its yaw under the clip's pitch and roll; the
+  mount's yaw is their median over the clip's time (``time_weights``: a frame left out
+  does not tilt it). The assumption is that the car's heading averages out — a car that
+  stays in its lane cannot head off to one side for long (its lateral position would
+  drift by ∫ v·sin(heading) dt); the median also keeps a curve's entry and exit, where
+  the car is still turning, from pulling it. The heading's spread is reported.
 - **lateral offset**: a frame's fitted offset is where the camera is in the lane: the
   car's position plus the mount's offset, which no clip of a driving car can tell
   apart. The mount's lateral offset is not fitted from a clip: it is ``lateral_m``
@@ -46,6 +48,7 @@ from .fit import (
 from .models import Camera, FisheyeCamera
 from .mount import CameraMount
 from .plausible import (
+    CLIP_NOISE_FLOORS,
     CLIP_OUTLIER_SPREADS,
     CLIP_TOLERANCES,
     MIN_CLIP_AGREEMENT,
@@ -234,7 +237,7 @@ def combine(results: list[FrameResult], camera: Camera, *, lateral_m: float = 0.
         spread = Spread.of(v)
         tol = CLIP_TOLERANCES[name]
         limits[name] = max(tol.absolute, tol.relative * abs(spread.median))
-        band = CLIP_OUTLIER_SPREADS * max(limits[name], spread.sigma)
+        band = CLIP_OUTLIER_SPREADS * max(CLIP_NOISE_FLOORS[name], spread.sigma)
         agree &= np.abs(v - spread.median) <= band
     if agree.sum() < MIN_CLIP_AGREEMENT * len(use):  # name the worst parameter
         raise _disagreement(use, values, checked, limits, "agree")
@@ -259,8 +262,8 @@ def combine(results: list[FrameResult], camera: Camera, *, lateral_m: float = 0.
         if abs(off_horizon) <= band:
             yaws[id(r)] = yaw
     timed = [r for r in fitted if id(r) in yaws]
-    weights = time_weights([r.t_s for r in timed])
-    med["yaw"] = float(np.sum(weights * np.array([yaws[id(r)] for r in timed])))
+    med["yaw"] = weighted_median(np.array([yaws[id(r)] for r in timed]),
+                                 time_weights([r.t_s for r in timed]))
     try:
         check_fitted_mount(med["height"], med["pitch"], med["roll"], med["yaw"])
         mount = CameraMount(height_m=med["height"], forward_m=camera.mount.forward_m,
@@ -327,6 +330,18 @@ def yaw_on_horizon(direction: np.ndarray, pitch_rad: float, roll_rad: float
     roll = np.array([[cr, -sr, 0.0], [sr, cr, 0.0], [0.0, 0.0, 1.0]])
     u = pitch.T @ roll.T @ (direction / np.linalg.norm(direction))
     return math.atan2(u[0], u[2]), -math.asin(max(-1.0, min(1.0, float(u[1]))))
+
+
+def weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
+    """The value below and above which half the weight lies (the mean of the two middle
+    values where the halves meet exactly, as ``np.median`` for equal weights)."""
+    order = np.argsort(values)
+    v, w = values[order], weights[order] / np.sum(weights)
+    cum = np.cumsum(w)
+    k = int(np.searchsorted(cum, 0.5 - 1e-12))
+    if abs(cum[k] - 0.5) < 1e-9 and k + 1 < len(v):
+        return float(0.5 * (v[k] + v[k + 1]))
+    return float(v[k])
 
 
 def time_weights(times_s: list[float]) -> np.ndarray:
@@ -456,4 +471,5 @@ def _spread_order(n: int) -> list[int]:
 
 
 __all__ = ["ClipFit", "ClipFitError", "ClipFrame", "FrameResult", "LineFit", "Spread",
-           "clip_focal", "combine", "fit_clip", "frame_fits", "sample_frames", "time_weights"]
+           "clip_focal", "combine", "fit_clip", "frame_fits", "sample_frames", "time_weights",
+           "weighted_median"]

@@ -89,6 +89,13 @@ VANISHING_TOLERANCE_RAD: float = math.radians(1.0)
 """Lines are parallel on the ground when their great circles pass within this angle of a
 common vanishing point [rad]."""
 
+MAX_REACH_GAP_RAD: float = math.radians(20.0)
+"""A straight road's lines are found up to near their vanishing point: the median of the
+used lines' gaps — the angle between the line's pixel nearest the vanishing point and
+the nearest point of its great circle the image shows — may be at most this [rad]. A
+curve's lines leave their tangent's circle early (gaps of 25–40° on the oval track's
+curves, 5–15° on its straights; the far left line is often lost at 15–30°)."""
+
 MAX_ROLL_RAD: float = math.radians(30.0)
 """Largest roll the fit searches [rad] (a fit beyond ``plausible.MAX_FIT_ROLL_RAD`` is
 refused after)."""
@@ -382,8 +389,33 @@ def fit_mount(frame: np.ndarray, camera: Camera, *, points: list[np.ndarray] | N
         rays, pix = rays[ok], pix[ok]
         circles = _great_circles(rays, scale.inlier_px / f_px, rng, scale.min_line_pixels)
         fits, direction = _road_lines(circles, rays, pix, scale.min_line_pixels)
+        gaps = [reach_gap(camera, f, direction) for f in fits if f.role != "other"]
+        if float(np.median(gaps)) > MAX_REACH_GAP_RAD:
+            raise MountFitError(f"the lines end {math.degrees(float(np.median(gaps))):.0f}° "
+                                "before their vanishing point: a curve, not a straight road",
+                                lines=tuple(fits))
     return _finish(camera, fits, direction, forward_m, f_px, lane_width_m, scale.inlier_px,
                    lateral_m)
+
+
+def reach_gap(camera: Camera, line: LineFit, direction: np.ndarray) -> float:
+    """How far short of the vanishing point ``direction`` a line's pixels stop [rad]: the
+    angle of its pixel nearest to it, less that of the nearest point of its great circle
+    inside the image (a straight marking is seen up to where resolution ends)."""
+    rays = camera.unproject(line.pixels)
+    rays = rays[np.all(np.isfinite(rays), axis=1)]
+    if not len(rays):
+        return math.pi
+    nearest = float(np.min(np.arccos(np.clip(rays @ direction, -1.0, 1.0))))
+    side = np.cross(line.normal, direction)
+    if float(np.mean(rays @ side)) < 0:
+        side = -side
+    t = np.radians(np.arange(0.0, 90.0, 0.25))
+    uv = camera.project(np.outer(np.cos(t), direction) + np.outer(np.sin(t), side))
+    inside = (np.all(np.isfinite(uv), axis=1) & (uv[:, 0] >= 0) & (uv[:, 1] >= 0)
+              & (uv[:, 0] <= camera.width - 1) & (uv[:, 1] <= camera.height - 1))
+    shown = float(t[inside].min()) if inside.any() else 0.0
+    return max(0.0, nearest - shown)
 
 
 def _circle_normal(rays: np.ndarray) -> np.ndarray:

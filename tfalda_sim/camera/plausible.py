@@ -76,10 +76,18 @@ CLIP_TOLERANCES: dict[str, ClipTolerance] = {
 """The spread of the agreeing frames a clip fit accepts, per parameter. A wider spread
 means the frames are not of one camera on one car, or some "lines" are not the road's."""
 
+CLIP_NOISE_FLOORS: dict[str, float] = {"pitch": math.radians(0.2),
+                                       "roll": math.radians(0.3), "height": 0.002,
+                                       "focal": 0.0}
+"""The least spread a parameter is taken to have across a clip's frames (pitch, roll
+[rad], height [m], focal length [px, relative to … none]): a frame's fit is good to a
+fraction of a pixel, so frames agreeing better than this are no evidence for a narrower
+band."""
+
 CLIP_OUTLIER_SPREADS: float = 3.0
-"""A frame whose parameter lies more than this many tolerances (``CLIP_TOLERANCES``, or
-the frames' own spread when larger) from the clip's median disagrees and is left out
-[1]."""
+"""A frame whose parameter lies more than this many spreads (the frames' own robust σ,
+at least ``CLIP_NOISE_FLOORS``) from the clip's median disagrees and is left out [1]: a
+curve's entry fitted as a straight, a frame of other lines."""
 
 MIN_CLIP_AGREEMENT: float = 0.5
 """At least this share of the fitted frames must agree on the mount [1]; fewer, and the

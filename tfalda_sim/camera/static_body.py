@@ -7,8 +7,9 @@ Two kinds of body, found across the clip's frames and joined (per column the hig
   own bright narrow structures (``fit.marking_mask``), found at the same place (within a
   shake) in most frames while the road moves (its markings move past, or the frames
   change elsewhere: the hall, the mat's border). Only those wholly in the
-  image's lower half count (a body over more hides the road; a solid road line that
-  happens to stay put reaches up to the horizon).
+  image's lower half count (a body over more hides the road), and not those that run on,
+  unbroken, into the moving road in most frames (a lane line's near end stays put for a
+  car that keeps its place in the lane).
 - **a dark bonnet's edge** — the single-frame detector (``fit.detect_bonnet``) run on
   each frame, kept when it finds the same edge in most of them (an edge that moves with
   the car's weaving is the road's, not the car's).
@@ -55,6 +56,11 @@ MIN_MOTION_SHARE: float = 0.02
 edges, the mat's border, markings), even with no bright structure moving (an empty
 road)."""
 
+RUNS_ON_SHARE: float = 0.05
+"""A structure that stays put runs on into the road in a frame when the frame's bright
+structure through it reaches higher up than its own top by more than this share of the
+image height [1] (toward the horizon, where a lane line goes)."""
+
 EDGE_AGREEMENT_PX: float = 3.0
 """A dark body's edge found in two frames is the same edge when its rows agree within
 this [px on a 480-row frame, scaled with the height]: the detector's blur."""
@@ -75,8 +81,10 @@ def _static_structures(frames: list[np.ndarray], marking_width_px: int
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * shake + 1, 2 * shake + 1))
     seen = np.zeros((h, w), np.uint16)
     near = np.zeros((h, w), np.uint16)
+    masks = []
     for frame in frames:
         m = marking_mask(frame, marking_width_px).astype(np.uint8)
+        masks.append(m)
         seen += m
         near += cv2.dilate(m, kernel)
     n = len(frames)
@@ -103,6 +111,23 @@ def _static_structures(frames: list[np.ndarray], marking_width_px: int
     keep[1:] = stats[1:, cv2.CC_STAT_TOP] >= lowest_top
     if not keep.any():
         return None, "what stays put reaches into the upper half (road lines, not the car)"
+    # A lane line's near end stays put for a car that keeps its place in the lane, but
+    # in the frames it runs on, unbroken, into the far road that moves: not the car's.
+    continues = np.zeros(count, np.int32)
+    runs_on_rows = RUNS_ON_SHARE * h
+    for m in masks:
+        _, lab_m, stats_m, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
+        hit = np.zeros(count, bool)
+        on = (m > 0) & (joined > 0)
+        pairs = np.unique(np.stack([labels[on], lab_m[on]]), axis=1)
+        for c, k in pairs.T:
+            # the frame's structure through it reaches higher up, toward the horizon
+            if k and stats_m[k, cv2.CC_STAT_TOP] < stats[c, cv2.CC_STAT_TOP] - runs_on_rows:
+                hit[c] = True
+        continues += hit
+    keep &= continues < STATIC_SHARE * n
+    if not keep.any():
+        return None, "what stays put runs on into the moving road (lane lines, not the car)"
     return keep[labels] & (joined > 0), ""
 
 
