@@ -568,6 +568,12 @@ def _finish(camera: Camera, fits: list[LineFit], direction: np.ndarray,
         mount = None
     try:
         check_fitted_mount(h, pitch, roll, yaw)
+        if abs(fitted_lateral) > lane_width_m / 2:
+            side = "left" if fitted_lateral > 0 else "right"
+            raise ImplausibleMount(
+                "lateral", f"the camera would be {abs(fitted_lateral) * 1000:.0f} mm {side} of "
+                           "the right lane's centre, outside the lane: the lines found are not "
+                           "the dashed centre line and its neighbours around the car")
         if mount is None:  # a lateral offset beyond the car
             raise ImplausibleMount("lateral", f"the camera {fitted_lateral:+.2f} m off the "
                                    "lane's centre is not on a car in the lane: the lines "
