@@ -11,11 +11,12 @@ what stays the same across the frames that remain:
 - **yaw**: a frame's fitted yaw is the mount's yaw plus the car's heading on the road at
   that moment (both turn the camera about the same vertical axis). Every fitted frame's
   road direction (two lines suffice) gives its yaw under the clip's pitch and roll; the
-  mount's yaw is their median over the clip's time (``time_weights``: a frame left out
-  does not tilt it). The assumption is that the car's heading averages out — a car that
-  stays in its lane cannot head off to one side for long (its lateral position would
-  drift by ∫ v·sin(heading) dt); the median also keeps a curve's entry and exit, where
-  the car is still turning, from pulling it. The heading's spread is reported.
+  mount's yaw is their mean over the clip's time (``time_weights``: a frame left out
+  does not tilt it) without the quarter of the time at each end (``YAW_TRIM``). The
+  assumption is that the car's heading averages out — a car that stays in its lane
+  cannot head off to one side for long (its lateral position would drift by
+  ∫ v·sin(heading) dt); the cut keeps a curve's entry and exit, where the car is still
+  turning, from pulling it. The heading's spread is reported.
 - **lateral offset**: a frame's fitted offset is where the camera is in the lane: the
   car's position plus the mount's offset, which no clip of a driving car can tell
   apart. The mount's lateral offset is not fitted from a clip: it is ``lateral_m``
@@ -33,9 +34,11 @@ from collections import Counter
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 from ..tracks.dimensions import LANE_WIDTH_M
+from .bonnet import Bonnet
 from .fit import (
     LineFit,
     MountFit,
@@ -44,6 +47,7 @@ from .fit import (
     fit_focal,
     fit_mount,
     residual_px,
+    road_direction,
 )
 from .models import Camera, FisheyeCamera
 from .mount import CameraMount
@@ -211,10 +215,13 @@ def frame_fits(frames: Iterable[ClipFrame], camera: Camera, *, mask: np.ndarray 
 
 
 def combine(results: list[FrameResult], camera: Camera, *, lateral_m: float = 0.0,
-            lane_width_m: float = LANE_WIDTH_M, focal: Spread | None = None) -> ClipFit:
+            lane_width_m: float = LANE_WIDTH_M, focal: Spread | None = None,
+            headings: list[tuple[float, np.ndarray]] | None = None) -> ClipFit:
     """The clip's mount from its frames' own fits (see the module's docstring);
-    ``camera`` gives the intrinsics, forward offset, body and frame rate. Raises
-    ``ClipFitError`` naming the parameter the frames disagree on, or why no frame fits."""
+    ``camera`` gives the intrinsics, forward offset, body and frame rate; ``headings``
+    (time [s], road direction in the camera frame) of more frames give the yaw instead
+    of the fitted frames' own directions. Raises ``ClipFitError`` naming the parameter the
+    frames disagree on, or why no frame fits."""
     fitted = [r for r in results if r.fit is not None]
     if not fitted:
         shown = next((r for r in results if r.error is not None and r.error.lines), None)
@@ -254,16 +261,18 @@ def combine(results: list[FrameResult], camera: Camera, *, lateral_m: float = 0.
     # Every fitted frame's road direction (two lines suffice) under the clip's pitch and
     # roll: its yaw, if the direction lies on the clip's horizon.
     band = CLIP_OUTLIER_SPREADS * limits["pitch"]
-    yaws: dict[int, float] = {}
-    for r in fitted:
-        assert r.fit is not None
-        yaw, off_horizon = yaw_on_horizon(r.fit.camera.mount.rotation()[:, 0], med["pitch"],
-                                          med["roll"])
+    directions = headings if headings else [
+        (r.t_s, r.fit.camera.mount.rotation()[:, 0]) for r in fitted if r.fit is not None]
+    timed: list[tuple[float, float]] = []  # (time, yaw)
+    for t_s, direction in directions:
+        yaw, off_horizon = yaw_on_horizon(direction, med["pitch"], med["roll"])
         if abs(off_horizon) <= band:
-            yaws[id(r)] = yaw
-    timed = [r for r in fitted if id(r) in yaws]
-    med["yaw"] = weighted_median(np.array([yaws[id(r)] for r in timed]),
-                                 time_weights([r.t_s for r in timed]))
+            timed.append((t_s, yaw))
+    if not timed:  # the fitted frames' own, then
+        timed = [(r.t_s, _values(r.fit)["yaw"]) for r in use if r.fit is not None]
+    timed.sort(key=lambda x: x[0])
+    yaw_values = np.array([y for _, y in timed])
+    med["yaw"] = trimmed_mean(yaw_values, time_weights([t for t, _ in timed]))
     try:
         check_fitted_mount(med["height"], med["pitch"], med["roll"], med["yaw"])
         mount = CameraMount(height_m=med["height"], forward_m=camera.mount.forward_m,
@@ -305,7 +314,7 @@ def combine(results: list[FrameResult], camera: Camera, *, lateral_m: float = 0.
         "pitch_deg": Spread.of(math.degrees(x["pitch"]) for x in kept),
         "roll_deg": Spread.of(math.degrees(x["roll"]) for x in kept),
         "height_m": Spread.of(x["height"] for x in kept),
-        "heading_deg": Spread.of(math.degrees(yaws[id(r)] - med["yaw"]) for r in timed),
+        "heading_deg": Spread.of(np.degrees(yaw_values - med["yaw"])),
         "car_offset_m": Spread.of(x["offset"] - lateral_m for x in kept),
         "residual_px": Spread.of(r.fit.residual_px for r in agreeing if r.fit is not None),
     }
@@ -332,29 +341,47 @@ def yaw_on_horizon(direction: np.ndarray, pitch_rad: float, roll_rad: float
     return math.atan2(u[0], u[2]), -math.asin(max(-1.0, min(1.0, float(u[1]))))
 
 
-def weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
-    """The value below and above which half the weight lies (the mean of the two middle
-    values where the halves meet exactly, as ``np.median`` for equal weights)."""
+YAW_TRIM: float = 0.25
+"""The yaw is the mean of the frames' yaws with this share of the weight cut off at each
+end [1] (the interquartile mean): the mean is what a car that stays in its lane averages
+out to, and a weaving car's headings gather at both ends of its swing (a median falls
+into one of them); the cut keeps a curve's entry and exit, where the car is still
+turning, and a wrong fit from pulling it."""
+
+
+def trimmed_mean(values: np.ndarray, weights: np.ndarray, trim: float = YAW_TRIM) -> float:
+    """The weighted mean of ``values`` without the lowest and highest ``trim`` of the
+    weight (a value at a cut counts with the part of its weight inside)."""
     order = np.argsort(values)
     v, w = values[order], weights[order] / np.sum(weights)
-    cum = np.cumsum(w)
-    k = int(np.searchsorted(cum, 0.5 - 1e-12))
-    if abs(cum[k] - 0.5) < 1e-9 and k + 1 < len(v):
-        return float(0.5 * (v[k] + v[k + 1]))
-    return float(v[k])
+    hi = np.cumsum(w)
+    lo = hi - w
+    inside = np.clip(np.minimum(hi, 1.0 - trim) - np.maximum(lo, trim), 0.0, None)
+    if inside.sum() <= 0:  # one value
+        return float(np.sum(v * w))
+    return float(np.sum(v * inside) / inside.sum())
+
+
+GAP_BRIDGE_INTERVALS: float = 2.0
+"""``time_weights`` bridges a gap between frames up to this many median intervals [1]:
+a frame or two left out (a wrong fit) is bridged, a curve's time is not."""
 
 
 def time_weights(times_s: list[float]) -> np.ndarray:
     """Weights (sum 1) of frames at ``times_s`` [s] for a mean over the clip's time: each
     frame stands for the time from halfway to its previous frame to halfway to its next
-    (the end frames for as long as their one neighbour's half interval, twice), so frames
-    left out (curves, refused) do not tilt the mean toward their neighbours' side; equal
-    weights when the times do not increase (no time stamps)."""
+    (the end frames for as long as their one neighbour's half interval, twice; a gap no
+    longer than ``GAP_BRIDGE_INTERVALS`` intervals), so a frame or two left out does not
+    tilt the mean toward their neighbours' side; equal weights when the times do not
+    increase (no time stamps)."""
     t = np.asarray(times_s, dtype=np.float64)
     n = len(t)
     if n < 3 or not np.all(np.isfinite(t)) or not np.all(np.diff(t) > 0):
         return np.full(n, 1.0 / max(n, 1))
+    # A long gap is time off the straight (a curve): bridged no further than twice the
+    # usual interval, or the frames at a curve's ends, still turning, would weigh most.
     gaps = np.diff(t)
+    gaps = np.minimum(gaps, GAP_BRIDGE_INTERVALS * float(np.median(gaps)))
     w = np.empty(n)
     w[1:-1] = 0.5 * (gaps[:-1] + gaps[1:])
     w[0], w[-1] = gaps[0], gaps[-1]
@@ -399,16 +426,81 @@ def _disagreement(use: list[FrameResult], values: list[dict[str, float]],
 
 
 def fit_clip(frames: list[ClipFrame], camera: Camera, *, mask: np.ndarray | None = None,
-             lane_width_m: float = LANE_WIDTH_M, lateral_m: float = 0.0,
-             seed: int = 0) -> ClipFit:
+             lane_width_m: float = LANE_WIDTH_M, lateral_m: float = 0.0, seed: int = 0,
+             heading_frames: list[ClipFrame] | None = None) -> ClipFit:
     """The mount of ``camera`` (its intrinsics, forward offset, body and frame rate kept)
     from the clip's grey ``frames``; ``mask`` (``(H, W)`` bool) the car's body, kept out
-    of the marking search. See the module's docstring."""
+    of the marking search; ``heading_frames`` (more frames, any one size, e.g. smaller:
+    ``HeadingSample``) give the yaw from their road directions. See the module's
+    docstring."""
     if not frames:
         raise ClipFitError("the clip has no frames")
     results = list(frame_fits(frames, camera, mask=mask, lane_width_m=lane_width_m,
                               seed=seed))
-    return combine(results, camera, lateral_m=lateral_m, lane_width_m=lane_width_m)
+    headings = None
+    if heading_frames:
+        small = scaled_camera(camera, *heading_frames[0].image.shape[::-1])
+        small_mask = None
+        if mask is not None:
+            small_mask = cv2.resize(mask.astype(np.uint8), (small.width, small.height),
+                                    interpolation=cv2.INTER_AREA) > 0
+        headings = []
+        for f in heading_frames:
+            direction = road_direction(f.image, small, mask=small_mask, seed=seed)
+            if direction is not None:
+                headings.append((f.t_s, direction))
+    return combine(results, camera, lateral_m=lateral_m, lane_width_m=lane_width_m,
+                   headings=headings)
+
+
+HEADING_FRAMES: int = 240
+"""Most frames whose road direction gives the yaw [1]: a weaving car's heading swings
+by ±10° and more, its mean over a few frames is off by degrees; the directions alone
+are cheap (no mount fitted, smaller frames)."""
+
+HEADING_WIDTH_PX: int = 480
+"""The heading frames are scaled down to at most this width [px]: the vanishing point
+needs no more."""
+
+
+def scaled_camera(camera: Camera, width: int, height: int) -> Camera:
+    """``camera``'s lens for its image scaled to ``width``×``height`` [px] (pixel centres
+    kept: u' + ½ = (u + ½) · width / camera.width); no body."""
+    sx, sy = width / camera.width, height / camera.height
+    K = camera.K.copy()
+    K[0, :] *= sx
+    K[1, :] *= sy
+    K[0, 2] = (camera.K[0, 2] + 0.5) * sx - 0.5
+    K[1, 2] = (camera.K[1, 2] + 0.5) * sy - 0.5
+    return camera.replace(K=K, width=width, height=height, bonnet=Bonnet.none())
+
+
+class HeadingSample:
+    """Every ``stride``-th frame of a clip, scaled to at most ``HEADING_WIDTH_PX`` wide,
+    the stride doubled whenever ``HEADING_FRAMES`` are held (memory bounded, regular in
+    time: no aliasing with a weave slower than a few strides)."""
+
+    def __init__(self, budget: int = HEADING_FRAMES, width_px: int = HEADING_WIDTH_PX
+                 ) -> None:
+        self.budget, self.width_px = budget, width_px
+        self.frames: list[ClipFrame] = []
+        self._stride, self._count = 1, 0
+
+    def add(self, frame: ClipFrame) -> None:
+        """Offer the clip's next frame."""
+        k = self._count
+        self._count += 1
+        if k % self._stride:
+            return
+        h, w = frame.image.shape
+        if w > self.width_px:
+            size = (self.width_px, max(1, int(round(h * self.width_px / w))))
+            frame = ClipFrame(frame.index, frame.t_s,
+                              cv2.resize(frame.image, size, interpolation=cv2.INTER_AREA))
+        self.frames.append(frame)
+        if len(self.frames) >= self.budget:
+            self.frames = self.frames[::2]
+            self._stride *= 2
 
 
 def clip_focal(frames: list[ClipFrame], *, mask: np.ndarray | None = None,
@@ -470,6 +562,20 @@ def _spread_order(n: int) -> list[int]:
     return order
 
 
-__all__ = ["ClipFit", "ClipFitError", "ClipFrame", "FrameResult", "LineFit", "Spread",
-           "clip_focal", "combine", "fit_clip", "frame_fits", "sample_frames", "time_weights",
-           "weighted_median"]
+__all__ = [
+    "ClipFit",
+    "ClipFitError",
+    "ClipFrame",
+    "FrameResult",
+    "HeadingSample",
+    "LineFit",
+    "Spread",
+    "clip_focal",
+    "combine",
+    "fit_clip",
+    "frame_fits",
+    "sample_frames",
+    "scaled_camera",
+    "time_weights",
+    "trimmed_mean",
+]

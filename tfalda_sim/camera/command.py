@@ -27,7 +27,15 @@ from ..outputs import Outputs
 from ..tracks.dimensions import LANE_WIDTH_M
 from ..video import ImageError, read_grey_image
 from .bonnet import Bonnet
-from .clip import ClipFitError, ClipFrame, Spread, clip_focal, fit_clip, sample_frames
+from .clip import (
+    ClipFitError,
+    ClipFrame,
+    HeadingSample,
+    Spread,
+    clip_focal,
+    fit_clip,
+    sample_frames,
+)
 from .drawing import draw_fit, fit_overlay
 from .fit import (
     LANE_WIDTH_FIT_RANGE_M,
@@ -333,6 +341,8 @@ class _Job:
     frame_rate_from: str
     source_frames: int
     notes: list[str]
+    heading_frames: list[ClipFrame] | None = None
+    """More frames, smaller, whose road directions give the yaw (a clip's)."""
 
 
 def _base_camera(args: argparse.Namespace, width: int, height: int,
@@ -398,12 +408,15 @@ def _read_job(args: argparse.Namespace) -> _Job:
         info = source.info
         size = (info.width_px, info.height_px)
         seen = 0
+        headings = HeadingSample()
 
         def grey() -> Iterator[ClipFrame]:
             nonlocal seen
             for f in source.frames():
                 seen += 1
-                yield ClipFrame(f.index, f.t_s, to_grey(f.image, size))
+                frame = ClipFrame(f.index, f.t_s, to_grey(f.image, size))
+                headings.add(frame)
+                yield frame
 
         frames = sample_frames(grey())
     except SourceError as exc:
@@ -422,7 +435,8 @@ def _read_job(args: argparse.Namespace) -> _Job:
         rate_from = "the --intrinsics profile" if rate is not None else \
             "not in the recording: the default (set it with --rate)"
     notes = list(info.notes)
-    return _Job(frames, len(frames) == 1, base, src, rate, rate_from, seen, notes)
+    return _Job(frames, len(frames) == 1, base, src, rate, rate_from, seen, notes,
+                headings.frames)
 
 
 def _overlay_png(path: Path, image: np.ndarray) -> None:
@@ -553,7 +567,7 @@ def _fit_clip(args: argparse.Namespace, job: _Job, overlay: Path
         base = base.replace(bonnet=bonnet)
         lateral = base.mount.lateral_m if args.lateral_m is None else args.lateral_m
         clip = fit_clip(job.frames, base, mask=mask, lane_width_m=args.lane_width,
-                        lateral_m=lateral)
+                        lateral_m=lateral, heading_frames=job.heading_frames)
         if focal is not None:
             clip.spreads["focal_px"] = focal
     except ClipFitError as exc:
@@ -582,7 +596,8 @@ def _fit_clip(args: argparse.Namespace, job: _Job, overlay: Path
             f"{math.degrees(m.roll_rad):.2f} ± {sp['roll_deg'].sigma:.2f}°, yaw "
             f"{math.degrees(m.yaw_rad):.2f}° (heading ± {sp['heading_deg'].sigma:.1f}°)"]
     lines = [f"frames         {clip.used} of {len(job.frames)} agree ({clip.fitted} fitted by "
-             f"themselves; {job.source_frames} in the source)",
+             f"themselves; {job.source_frames} in the source; the heading from "
+             f"{sp['heading_deg'].n})",
              "spread (σ)     " + ", ".join(
                  f"{k} {_spread_text(k, v)}" for k, v in sp.items()),
              f"car            heading ±{sp['heading_deg'].sigma:.1f}° about the lane's "

@@ -398,6 +398,32 @@ def fit_mount(frame: np.ndarray, camera: Camera, *, points: list[np.ndarray] | N
                    lateral_m)
 
 
+def road_direction(frame: np.ndarray, camera: Camera, *, mask: np.ndarray | None = None,
+                   seed: int = 0) -> np.ndarray | None:
+    """The road's direction (its vanishing point) in the camera frame, a unit vector, from
+    the markings of ``frame`` seen through ``camera`` — two parallel lines suffice, no
+    mount is fitted — or None where the frame shows no straight road."""
+    _check_frame(frame, camera)
+    f_px = float(np.sqrt(camera.K[0, 0] * camera.K[1, 1]))
+    scale = SearchScale.for_image(camera.width, camera.height, f_px)
+    rng = np.random.default_rng(seed)
+    pix = marking_pixels(frame, scale.marking_width_px, mask)
+    if len(pix) > MAX_SEARCH_PIXELS:
+        pix = pix[rng.choice(len(pix), MAX_SEARCH_PIXELS, replace=False)]
+    if len(pix) < 2 * scale.min_line_pixels:
+        return None
+    rays = camera.unproject(pix)
+    ok = np.all(np.isfinite(rays), axis=1)
+    rays, pix = rays[ok], pix[ok]
+    circles = _great_circles(rays, scale.inlier_px / f_px, rng, scale.min_line_pixels)
+    try:
+        fits, direction = _road_lines(circles, rays, pix, scale.min_line_pixels)
+    except MountFitError:
+        return None
+    gaps = [reach_gap(camera, f, direction) for f in fits if f.role != "other"]
+    return None if float(np.median(gaps)) > MAX_REACH_GAP_RAD else direction
+
+
 def reach_gap(camera: Camera, line: LineFit, direction: np.ndarray) -> float:
     """How far short of the vanishing point ``direction`` a line's pixels stop [rad]: the
     angle of its pixel nearest to it, less that of the nearest point of its great circle
