@@ -412,7 +412,7 @@ def _disagreement(use: list[FrameResult], values: list[dict[str, float]],
     what = (f"{len(values)} frames of straight road disagree on the {name}: "
             f"{fmt.format(v.min() * scale)}–{fmt.format(v.max() * scale)}{unit} (spread "
             f"{fmt.format(sigma * scale)}{unit}, more than the "
-            f"{fmt.format(limits[name] * scale)}{unit} {tol.why})")
+            f"{fmt.format(limits[name] * scale)}{unit} allowed: {tol.why})")
     if kind == "agree":
         what += (f"; fewer than {MIN_CLIP_AGREEMENT:.0%} agree: the lines found are not one "
                  "camera's view of the road's markings")

@@ -67,8 +67,8 @@ CLIP_TOLERANCES: dict[str, ClipTolerance] = {
     "roll": ClipTolerance(math.radians(1.0), 0.0, "°", math.degrees(1.0),
                           "a car's body rolls by a degree or less on a straight"),
     "height": ClipTolerance(0.005, 0.05, " mm", 1000.0,
-                            "the springs move the camera by millimetres; 5 % of the height "
-                            "is what a pixel's error in a line's angle costs at the far end"),
+                            "the springs move a camera by millimetres, and a pixel's error "
+                            "in a line's angle costs a few per cent of the height"),
     "focal": ClipTolerance(0.0, 0.03, " px", 1.0,
                            "one lens: the focal lengths fitted per frame agree within a few "
                            "per cent"),
