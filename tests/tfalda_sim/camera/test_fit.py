@@ -49,7 +49,7 @@ def _camera(rng: np.random.Generator, k: int) -> FisheyeCamera | PinholeCamera:
 def test_fit_recovers_random_mounts_of_both_lens_models() -> None:
     """Frames rendered with random known mounts, both lens models: on ≥ 20 of 24 the fit
     recovers pitch and roll within 0.3°, yaw within 0.5°, height within 5 mm (the
-    issue's bounds); the others it refuses with an error (never a wrong mount)."""
+    required bounds); the others it refuses with an error (never a wrong mount)."""
     track = load_named("straight")
     scene = build_scene(track)
     rng = np.random.default_rng(17)
