@@ -24,6 +24,7 @@ from ..cli_common import (
     json_text,
 )
 from ..outputs import Outputs
+from ..sources.command import add_source_options
 from ..tracks.dimensions import LANE_WIDTH_M
 from ..video import ImageError, read_grey_image
 from .bonnet import Bonnet
@@ -91,15 +92,7 @@ def register(sub: Any) -> None:
                      help="an image (PNG/JPEG, any bit depth, grey or colour), a video, a "
                           "folder or glob of images ('clip/*.png'), a ROS 1/2 bag or an MCAP "
                           "file")
-    fit.add_argument("--topic", help="the image topic of a bag or MCAP file (default: the "
-                                     "recording's only one)")
-    fit.add_argument("--frames", type=_frame_range, metavar="A:B",
-                     help="the clip's frames A to B−1, counted from 0 (default: all)")
-    fit.add_argument("--rate", type=bounded_float_arg(MIN_FRAME_RATE_HZ, MAX_FRAME_RATE_HZ,
-                                                      "Hz", why="a model car's camera"),
-                     metavar="HZ", help="the frame rate [Hz] of frames without time stamps "
-                                        "(an image folder; default: the recording's own), "
-                                        "stored in the profile")
+    add_source_options(fit)
     lens = fit.add_mutually_exclusive_group()
     lens.add_argument("--intrinsics", type=Path,
                       help="the camera's calibration: a profile (a name, e.g. reference-car, "
@@ -235,16 +228,6 @@ def _points(path: Path) -> list[np.ndarray | None]:
         raise CliError(f"--points: unknown key {unknown[0]!r} (known: centre, left, right)")
     return [None if data.get(k) is None else _pixel_list(data[k], f"--points {path}: {k}")
             for k in ("centre", "left", "right")]
-
-
-def _frame_range(text: str) -> Any:
-    """argparse type of ``--frames``: ``A:B`` (``sources.FrameRange``)."""
-    from ..sources import FrameRange
-
-    try:
-        return FrameRange.parse(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _bonnet_polygon(spec: str) -> np.ndarray:

@@ -58,6 +58,7 @@ from .models import (
     PinholeCamera,
 )
 from .mount import CameraMount
+from .ros_info import LENS_OF_ROS_MODEL
 
 PROFILE_FORMAT: str = "tfalda-sim-camera/1"
 """The ``format`` value of a camera profile file."""
@@ -520,10 +521,10 @@ def _ros_intrinsics(path: Path, data: dict, lens: LensModel | None) -> Intrinsic
              "distortion_coefficients", "rectification_matrix", "projection_matrix")
     _unknown(path, "the camera_info file", data, known)
     model = data["distortion_model"]
-    ros = {"equidistant": LensModel.FISHEYE, "plumb_bob": LensModel.PINHOLE}
+    ros = LENS_OF_ROS_MODEL
     if not isinstance(model, str) or model not in ros:
         raise CameraFileError(f"{path}: distortion_model {model!r} is not supported (known: "
-                              "equidistant, plumb_bob)")
+                              f"{', '.join(ros)})")
     found = ros[model]
     if lens is not None and lens is not found:
         raise CameraFileError(f"{path}: distortion_model {model} is a {found.value} lens, "
@@ -552,7 +553,7 @@ def intrinsics_from_camera_info(where: str, width: int, height: int, K: np.ndarr
     """The intrinsics of a recording's ``camera_info`` (``where`` names it in errors):
     ROS's ``equidistant`` is a fisheye, ``plumb_bob`` a pinhole; checked as a calibration
     file is (``CameraFileError``)."""
-    ros = {"equidistant": LensModel.FISHEYE, "plumb_bob": LensModel.PINHOLE}
+    ros = LENS_OF_ROS_MODEL
     if distortion_model not in ros:
         raise CameraFileError(f"{where}: distortion_model {distortion_model!r} is not "
                               "supported (known: equidistant, plumb_bob); give --intrinsics")

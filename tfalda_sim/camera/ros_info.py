@@ -14,6 +14,10 @@ ROS_DISTORTION_MODELS: dict[LensModel, str] = {LensModel.FISHEYE: "equidistant",
 """ROS's ``distortion_model`` of each lens model (OpenCV's fisheye is ROS's equidistant,
 its 5-coefficient pinhole ROS's plumb_bob)."""
 
+LENS_OF_ROS_MODEL: dict[str, LensModel] = {name: lens
+                                           for lens, name in ROS_DISTORTION_MODELS.items()}
+"""The lens model of each ROS ``distortion_model`` read (camera_info files and topics)."""
+
 
 def camera_info_of(camera: Camera) -> CameraInfo:
     """``camera``'s size, K and D as a recording's camera_info."""
@@ -21,13 +25,3 @@ def camera_info_of(camera: Camera) -> CameraInfo:
                       K=np.array(camera.K, np.float64).reshape(3, 3),
                       D=np.array(camera.D, np.float64).ravel(),
                       distortion_model=ROS_DISTORTION_MODELS[camera.lens])
-
-
-def lens_of(info: CameraInfo) -> LensModel:
-    """The lens model of a camera_info's ``distortion_model``; ``ValueError`` naming the
-    models known for any other."""
-    for lens, name in ROS_DISTORTION_MODELS.items():
-        if info.distortion_model == name:
-            return lens
-    raise ValueError(f"camera_info's distortion_model {info.distortion_model!r} is not "
-                     f"supported (known: {', '.join(ROS_DISTORTION_MODELS.values())})")

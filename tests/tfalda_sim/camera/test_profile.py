@@ -292,3 +292,20 @@ def test_an_exponent_yaml_reads_as_text_is_explained(tmp_path: Path, written: st
 
         run = tfalda("camera", "show", path, cwd=tmp_path, code=2)
         assert "got '1e9': YAML 1.1" in run.err and "write 1000000000.0" in run.err
+
+
+@pytest.mark.parametrize("name", ["thesis", "reference-car"])
+def test_a_camera_as_camera_info_and_back_is_the_same_lens(name: str) -> None:
+    """What a recording's /camera/camera_info carries is the camera's calibration."""
+    from tfalda_sim.camera.profile import intrinsics_from_camera_info
+    from tfalda_sim.camera.ros_info import camera_info_of
+
+    cam = load_camera(name)
+    info = camera_info_of(cam)
+    assert info.distortion_model == {"fisheye": "equidistant", "pinhole": "plumb_bob"}[
+        cam.lens.value]
+    back = intrinsics_from_camera_info("topic", info.width_px, info.height_px, info.K, info.D,
+                                       info.distortion_model).camera(cam.mount)
+    assert back.lens is cam.lens and (back.width, back.height) == (cam.width, cam.height)
+    np.testing.assert_array_equal(back.K, cam.K)
+    np.testing.assert_array_equal(back.D, cam.D)
