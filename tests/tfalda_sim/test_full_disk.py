@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 
 from tests.cli_helpers import SCRIPT, TIMEOUT_S, Run, child_env, tfalda
+from tests.small_disk import tmpfs
 from tfalda_sim.video import VideoWriter
 
 VIDEO_LIMIT = 1 << 20
@@ -86,18 +87,8 @@ def small(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[SmallDisk]
     if request.param == "limit":
         yield SmallDisk("limit", folder, tmp_path)
         return
-    try:
-        mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=4m", "tmpfs",
-                                  str(folder)], capture_output=True, check=False).returncode
-    except OSError:
-        mounted = -1
-    if mounted != 0:
-        pytest.skip("cannot mount a tmpfs here (needs root); the size limit case runs")
-    try:
+    with tmpfs(folder, "4m"):
         yield SmallDisk("tmpfs", folder, tmp_path)
-    finally:
-        if subprocess.run(["umount", str(folder)], check=False).returncode != 0:
-            subprocess.run(["umount", "-l", str(folder)], check=False)
 
 
 def _assert_refused(disk: SmallDisk, run: Run, target: str) -> None:

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.small_disk import tmpfs
 from tests.tfalda_sim.recording.readback import read_bag, read_mcap, steps
 from tfalda_sim.fileio import WriteError
 from tfalda_sim.recording import CAMERA_TOPIC, Recorder, RecordingFormat
@@ -60,18 +61,8 @@ def disk(request: pytest.FixtureRequest, tmp_path: Path) -> Iterator[tuple[str, 
     if request.param == "limit":
         yield "limit", folder
         return
-    try:
-        mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=8m", "tmpfs",
-                                  str(folder)], capture_output=True, check=False).returncode
-    except OSError:
-        mounted = -1
-    if mounted != 0:
-        pytest.skip("cannot mount a tmpfs here (needs root); the size limit case runs")
-    try:
+    with tmpfs(folder, "8m"):
         yield "tmpfs", folder
-    finally:
-        if subprocess.run(["umount", str(folder)], check=False).returncode != 0:
-            subprocess.run(["umount", "-l", str(folder)], check=False)
 
 
 def _fill(folder: Path, room: int) -> None:
