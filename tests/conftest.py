@@ -1,9 +1,11 @@
 """Shared fixtures: generated tracks are cached for the whole test run (generation is
-deterministic); stable-baselines3's log folders go to the run's temporary folder."""
+deterministic); stable-baselines3's log folders go to the run's temporary folder; Ctrl-C
+raises KeyboardInterrupt in the test process however the run was started."""
 
 from __future__ import annotations
 
 import functools
+import signal
 from collections.abc import Iterator
 
 import pytest
@@ -23,6 +25,19 @@ def eight() -> Track:
         if generated(seed).intersections:
             return generated(seed)
     raise AssertionError("no figure-eight among the first 100 seeds")
+
+
+@pytest.fixture(autouse=True, scope="session")
+def ctrl_c_raises() -> Iterator[None]:
+    """The Ctrl-C tests send SIGINT to this process and expect KeyboardInterrupt. A shell
+    starts a background job (``make test &``, a CI runner's) with SIGINT ignored, and
+    Python then installs no handler of its own: put Python's in for the run."""
+    before = signal.getsignal(signal.SIGINT)
+    if before == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    if before == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, before)
 
 
 @pytest.fixture(autouse=True, scope="session")
