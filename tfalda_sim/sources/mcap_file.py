@@ -32,10 +32,9 @@ from tfalda_sim.sources.decode import (
     encoding_note,
     encoding_of,
     image_of,
-    stamp_ns,
 )
+from tfalda_sim.sources.messages import first_frames, frame_of, optional_camera_info
 from tfalda_sim.sources.stream import (
-    RATE_SAMPLE_FRAMES,
     Loader,
     StreamSource,
     median_rate_hz,
@@ -89,9 +88,14 @@ class McapSource(StreamSource):
                 if channel.topic == chosen.name:
                     self._check_encoding(channel, contents.schemas.get(channel.schema_id))
             self._stamp0 = 0
-            first, stamps, logged = self._first(reader)
+            name = chosen.name
+            first, stamps, logged = first_frames(path, name, (
+                (message.log_time, functools.partial(self._decode, name, k, schema, channel,
+                                                     message))
+                for k, (schema, channel, message) in enumerate(self._messages(reader, name))))
         info_topic = camera_info_topic(chosen.name, topics)
-        cam, cam_note = self._optional_camera_info(info_topic)
+        cam, cam_note = optional_camera_info(
+            None if info_topic is None else functools.partial(self._camera_info, info_topic))
         msgtype, msg = first
         label = encoding_label(msgtype, msg)
         try:
@@ -218,48 +222,6 @@ class McapSource(StreamSource):
 
     # -- what opening reads -----------------------------------------------------------------
 
-    def _first(self, reader: McapReader) -> tuple[tuple[str, Any], list[int], int]:
-        """The first message (type, message), the time stamps [ns] of the first
-        ``RATE_SAMPLE_FRAMES`` frames (up to one that does not decode), and how many of
-        those had no header stamp."""
-        first: tuple[str, Any] | None = None
-        stamps: list[int] = []
-        logged = 0
-        for index, (schema, channel, message) in enumerate(
-                self._messages(reader, self.topic.name)):
-            try:
-                msgtype, msg = self._decode(self.topic.name, index, schema, channel, message)
-            except SourceError:
-                if first is None:
-                    raise
-                break
-            if first is None:
-                first = (msgtype, msg)
-            logged += stamp_ns(msg) == 0 and message.log_time != 0
-            stamps.append(self._stamp_of(msg, message.log_time))
-            if len(stamps) >= RATE_SAMPLE_FRAMES:
-                break
-        if first is None:
-            raise SourceError(f"{self.path}: topic {self.topic.name} has no messages; the "
-                              "recording holds no frames")
-        return first, stamps, logged
-
-    @staticmethod
-    def _stamp_of(msg: Any, log_ns: int) -> int:
-        stamp = stamp_ns(msg)
-        return stamp if stamp != 0 else log_ns
-
-    def _optional_camera_info(self, topic: Topic | None
-                              ) -> tuple[CameraInfo | None, str | None]:
-        """The camera_info (None without one) and, when its message does not decode, a
-        note saying so: the frames are read without it."""
-        if topic is None:
-            return None, None
-        try:
-            return self._camera_info(topic), None
-        except SourceError as exc:
-            return None, f"camera_info not used: {exc}"
-
     def _camera_info(self, topic: Topic) -> CameraInfo | None:
         """The first message of the camera_info topic as a ``CameraInfo``."""
         with self._reader() as (_, reader):
@@ -277,12 +239,8 @@ class McapSource(StreamSource):
     def _load(self, index: int, schema: Schema | None, channel: Channel, message: Message
               ) -> tuple[float, np.ndarray]:
         msgtype, msg = self._decode(self.topic.name, index, schema, channel, message)
-        try:
-            image = image_of(msgtype, msg)
-        except DecodeError as exc:
-            raise SourceError(f"{self.path}: frame {index} of {self.topic.name}: {exc}; "
-                              "select frames without it with --frames A:B") from None
-        return (self._stamp_of(msg, message.log_time) - self._stamp0) / 1e9, image
+        return frame_of(self.path, self.topic.name, index, msgtype, msg, message.log_time,
+                        self._stamp0)
 
     def _items(self) -> Iterator[tuple[int, Loader]]:
         with self._reader() as (_, reader):

@@ -33,10 +33,9 @@ from tfalda_sim.sources.decode import (
     encoding_note,
     encoding_of,
     image_of,
-    stamp_ns,
 )
+from tfalda_sim.sources.messages import first_frames, frame_of, optional_camera_info
 from tfalda_sim.sources.stream import (
-    RATE_SAMPLE_FRAMES,
     Loader,
     StreamSource,
     median_rate_hz,
@@ -106,8 +105,13 @@ class RosBagSource(StreamSource):
                                   f"({reason(exc)}); {self._advice()}") from None
             self.topic = chosen
             self._stamp0 = 0
-            first, stamps, logged = self._first(reader, chosen)
-            cam, cam_note = self._optional_camera_info(reader, info_topic)
+            name = chosen.name
+            first, stamps, logged = first_frames(path, name, (
+                (log_ns, functools.partial(self._typed, name, k, msgtype, raw))
+                for k, (msgtype, log_ns, raw) in enumerate(self._messages(reader, name))))
+            cam, cam_note = optional_camera_info(
+                None if info_topic is None
+                else functools.partial(self._camera_info, reader, info_topic))
         finally:
             with contextlib.suppress(Exception):
                 reader.close()
@@ -197,6 +201,9 @@ class RosBagSource(StreamSource):
                            f"({reason(exc)}); {self._advice()}, or select frames before it "
                            "with --frames A:B")
 
+    def _typed(self, topic: str, index: int, msgtype: str, raw: bytes) -> tuple[str, Any]:
+        return msgtype, self._deserialize(topic, index, msgtype, raw)
+
     def _deserialize(self, topic: str, index: int, msgtype: str, raw: bytes) -> Any:
         try:
             if self.ros1:
@@ -208,48 +215,6 @@ class RosBagSource(StreamSource):
                               "frames without it with --frames A:B") from None
 
     # -- what opening reads -----------------------------------------------------------------
-
-    def _first(self, reader: Reader, topic: Topic
-               ) -> tuple[tuple[str, Any], list[int], int]:
-        """The first message (type, message), the time stamps [ns] of the first
-        ``RATE_SAMPLE_FRAMES`` frames (up to one that does not decode: that frame's error
-        belongs to a pass that reaches it), and how many of those had no header stamp."""
-        first: tuple[str, Any] | None = None
-        stamps: list[int] = []
-        logged = 0
-        for index, (msgtype, log_ns, raw) in enumerate(self._messages(reader, topic.name)):
-            try:
-                msg = self._deserialize(topic.name, index, msgtype, raw)
-            except SourceError:
-                if first is None:
-                    raise
-                break
-            if first is None:
-                first = (msgtype, msg)
-            logged += stamp_ns(msg) == 0 and log_ns != 0
-            stamps.append(self._stamp_of(msg, log_ns))
-            if len(stamps) >= RATE_SAMPLE_FRAMES:
-                break
-        if first is None:
-            raise SourceError(f"{self.path}: topic {topic.name} has no messages; the "
-                              "recording holds no frames")
-        return first, stamps, logged
-
-    @staticmethod
-    def _stamp_of(msg: Any, log_ns: int) -> int:
-        stamp = stamp_ns(msg)
-        return stamp if stamp != 0 else log_ns
-
-    def _optional_camera_info(self, reader: Reader, topic: Topic | None
-                              ) -> tuple[CameraInfo | None, str | None]:
-        """The camera_info (None without one) and, when its message does not decode, a
-        note saying so: the frames are read without it."""
-        if topic is None:
-            return None, None
-        try:
-            return self._camera_info(reader, topic), None
-        except SourceError as exc:
-            return None, f"camera_info not used: {exc}"
 
     def _camera_info(self, reader: Reader, topic: Topic) -> CameraInfo | None:
         """The first message of the camera_info topic as a ``CameraInfo``."""
@@ -265,12 +230,7 @@ class RosBagSource(StreamSource):
     def _load(self, index: int, msgtype: str, log_ns: int, raw: bytes
               ) -> tuple[float, np.ndarray]:
         msg = self._deserialize(self.topic.name, index, msgtype, raw)
-        try:
-            image = image_of(msgtype, msg)
-        except DecodeError as exc:
-            raise SourceError(f"{self.path}: frame {index} of {self.topic.name}: {exc}; "
-                              "select frames without it with --frames A:B") from None
-        return (self._stamp_of(msg, log_ns) - self._stamp0) / 1e9, image
+        return frame_of(self.path, self.topic.name, index, msgtype, msg, log_ns, self._stamp0)
 
     def _items(self) -> Iterator[tuple[int, Loader]]:
         reader = self._open()

@@ -31,6 +31,7 @@ from tfalda_sim.sources import (
     FrameRange,
     SourceError,
     mcap_file,
+    messages,
     open_source,
     ros,
     to_grey,
@@ -120,14 +121,13 @@ def test_frames_outside_the_range_are_not_decoded(kind: str, tmp_path: Path,
                                                   monkeypatch: pytest.MonkeyPatch) -> None:
     path = record(kind, tmp_path, small, stamps)
     source = open_source(path, frames=FrameRange(3, 4))
-    module = ros if kind == "ros1" else mcap_file
     decoded = []
 
     def counting(msgtype: str, msg: Any) -> np.ndarray:
         decoded.append(msgtype)
         return np.zeros((120, 188), np.uint8)
 
-    monkeypatch.setattr(module, "image_of", counting)
+    monkeypatch.setattr(messages, "image_of", counting)  # a pass's decoding
     assert [f.index for f in source.frames()] == [3]
     assert len(decoded) == 1
 
