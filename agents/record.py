@@ -65,10 +65,9 @@ class RunRecorder:
         obs = frame.lanes
         left, right = ego_boundaries(env.track, env.camera, frame.camera_pose)
         truth = np.vstack([polyline_segments(left), polyline_segments(right)])
-        finite = np.all(np.isfinite(obs.lanes), axis=1)
         self.recorder.write(RecordedStep(
             t_s=t_s, frame=env.camera_frame(),
-            lanes=obs.lanes, accepted=finite & ~obs.replaced, rois=obs.rois,
+            lanes=obs.lanes, accepted=obs.accepted, rois=obs.rois,
             fault_counter=int(obs.fault_count), roi_reset=bool(obs.roi_reset),
             state=obs.state.value, pose=env.car_pose, speed_m_s=float(info["speed_m_s"]),
             truth_lanes=truth, cross_track_m=float(info["cross_track_m"]),

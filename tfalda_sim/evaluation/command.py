@@ -541,7 +541,7 @@ def _recording_hook(recorder: Any, label: str, scenario: Any) -> Any:
         lateral = track.locate(x, y, s_hint_m=s_hint).lateral_m
         recorder.write(RecordedStep(
             t_s=float(traj.times_s[k] - traj.times_s[0]), frame=frame, lanes=obs.lanes,
-            accepted=np.all(np.isfinite(obs.lanes), axis=1) & ~obs.replaced, rois=obs.rois,
+            accepted=obs.accepted, rois=obs.rois,
             fault_counter=int(obs.fault_count), roi_reset=bool(obs.roi_reset),
             state=obs.state.value, pose=(x, y, yaw), speed_m_s=float(traj.speeds_m_s[k]),
             truth_lanes=np.vstack([polyline_segments(truth.left_boundary_px),

@@ -85,6 +85,12 @@ class LaneObservation:
     def n_rows(self) -> int:
         return len(self.widths)
 
+    @property
+    def accepted(self) -> np.ndarray:
+        """(n,) bool: the ROIs with a lane of this frame's that the LIS kept (a lane, not
+        replaced by last frame's): the detections of a replay, a recording's kept lanes."""
+        return np.all(np.isfinite(self.lanes), axis=1) & ~self.replaced
+
 
 _FUSED_STATES = {STRAIGHT: StateKind.STRAIGHT, LEFT_CURVE: StateKind.LEFT_CURVE,
                  RIGHT_CURVE: StateKind.RIGHT_CURVE}

@@ -121,7 +121,7 @@ def _frame_step(detector: Detector, hough: HoughDetector | None,
     dt = time.perf_counter() - t0
     # TFALDA always returns a lane per ROI; a detection is one the LIS did not replace by
     # last frame's.
-    lanes = int((np.all(np.isfinite(obs.lanes), axis=1) & ~obs.replaced).sum())
+    lanes = int(obs.accepted.sum())
     picture = draw_observation(frame, obs, text=text) if annotate else None
     return lanes, bool(obs.roi_reset), picture, dt, obs
 
@@ -172,9 +172,8 @@ def _recorded(t_s: float, frame: np.ndarray, result: HoughResult | LaneObservati
     """One replayed frame as a recording's step."""
     if isinstance(result, HoughResult):
         return RecordedStep(t_s=t_s, frame=frame, segments=result.segments)
-    finite = np.all(np.isfinite(result.lanes), axis=1)
     return RecordedStep(t_s=t_s, frame=frame, lanes=result.lanes,
-                        accepted=finite & ~result.replaced, rois=result.rois,
+                        accepted=result.accepted, rois=result.rois,
                         fault_counter=int(result.fault_count),
                         roi_reset=bool(result.roi_reset), state=result.state.value)
 

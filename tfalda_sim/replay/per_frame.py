@@ -35,8 +35,7 @@ def lanes_record(index: int, loop: int, t_s: float, obs: LaneObservation) -> dic
     """The JSON line of one TFALDA + LIS frame."""
     lanes = [_segment(row) for row in obs.lanes]
     return {"frame": index, "loop": loop, "t_s": _time(t_s), "lanes": lanes,
-            "accepted": [lane is not None and not bool(r)
-                         for lane, r in zip(lanes, obs.replaced, strict=True)],
+            "accepted": [bool(a) for a in obs.accepted],
             "fault_counter": int(obs.fault_count), "roi_reset": bool(obs.roi_reset),
             "state": obs.state.value}
 
