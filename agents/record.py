@@ -18,7 +18,13 @@ import numpy as np
 
 from tfalda_sim.camera.ros_info import camera_info_of
 from tfalda_sim.envs import TfaldaTrackEnv
-from tfalda_sim.recording import RecordedStep, Recorder, RecordingFormat, polyline_segments
+from tfalda_sim.recording import (
+    RecordedStep,
+    Recorder,
+    RecordingClock,
+    RecordingFormat,
+    polyline_segments,
+)
 from tfalda_sim.rendering.truth import ego_boundaries
 
 
@@ -45,8 +51,7 @@ class RunRecorder:
         self.path, self.fmt, self.source = Path(path), fmt, source
         self.recorder: Recorder | None = None
         self._last: object = None  # the frame recorded last (a new result is a new object)
-        self._last_t_s = -1.0
-        self._offset_s = 0.0  # the episodes before this one (a recovery starts at step 0)
+        self._clock: RecordingClock | None = None  # a recovery's episode starts at step 0
 
     def step(self, env: TfaldaTrackEnv, info: dict[str, Any]) -> None:
         frame = env.last_frame
@@ -57,11 +62,8 @@ class RunRecorder:
             self.recorder = Recorder(self.path, self.fmt, camera_info=camera_info_of(env.camera),
                                      source=self.source)
         rate = env.camera.frame_rate_hz
-        t_s = self._offset_s + frame.step / rate
-        if t_s <= self._last_t_s:  # a new episode: its steps count from 0 again
-            self._offset_s = self._last_t_s + 1.0 / rate - frame.step / rate
-            t_s = self._offset_s + frame.step / rate
-        self._last_t_s = t_s
+        self._clock = self._clock or RecordingClock(rate)
+        t_s = self._clock.time(frame.step / rate)
         obs = frame.lanes
         left, right = ego_boundaries(env.track, env.camera, frame.camera_pose)
         truth = np.vstack([polyline_segments(left), polyline_segments(right)])

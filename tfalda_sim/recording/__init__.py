@@ -8,6 +8,7 @@ and bag folder), ``writer`` (the recorder: temporary files, errors, interrupts).
 """
 
 from tfalda_sim.recording.channels import CHANNELS, Channel
+from tfalda_sim.recording.clock import RecordingClock
 from tfalda_sim.recording.step import RecordedStep, polyline_segments
 from tfalda_sim.recording.writer import (
     CAMERA_TOPIC,
@@ -18,4 +19,4 @@ from tfalda_sim.recording.writer import (
 )
 
 __all__ = ["CAMERA_TOPIC", "CHANNELS", "CUSTOM_DATA_KEY", "METADATA_NAME", "Channel",
-           "RecordedStep", "Recorder", "RecordingFormat", "polyline_segments"]
+           "RecordedStep", "Recorder", "RecordingClock", "RecordingFormat", "polyline_segments"]

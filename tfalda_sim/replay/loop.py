@@ -54,7 +54,7 @@ from ..perception.hough import (
     HoughResult,
 )
 from ..perception.params import IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX, is_thesis_camera
-from ..recording import RecordedStep, Recorder, RecordingFormat
+from ..recording import RecordedStep, Recorder, RecordingClock, RecordingFormat
 from ..rendering.overlay import draw_hough, draw_observation, stage_view
 from ..sources import FrameRange, SourceError, SourceInfo, open_source, to_grey
 from ..video import VideoWriter, is_grey
@@ -145,28 +145,6 @@ def _conversions(info: SourceInfo, first: np.ndarray, size: tuple[int, int]) -> 
     return out
 
 
-class _RecordingClock:
-    """A recording's time stamps for the replayed frames: the source's own, made to
-    increase over the loops (a pass starts a frame interval after the last), and frame
-    counts at ``fps`` where the source has none."""
-
-    def __init__(self, fps: float) -> None:
-        self.dt_s = 1.0 / fps
-        self.last_s = -math.inf
-        self.offset_s = 0.0
-
-    def time(self, t_s: float) -> float:
-        if not math.isfinite(t_s):
-            t = self.last_s + self.dt_s if math.isfinite(self.last_s) else 0.0
-        else:
-            t = self.offset_s + t_s
-            if t <= self.last_s:  # the next pass over the recording
-                self.offset_s = self.last_s + self.dt_s - t_s
-                t = self.offset_s + t_s
-        self.last_s = t
-        return t
-
-
 def _recorded(t_s: float, frame: np.ndarray, result: HoughResult | LaneObservation
               ) -> RecordedStep:
     """One replayed frame as a recording's step."""
@@ -255,7 +233,7 @@ def replay(path: str | Path, detector: Detector, *, loops: int | None = 1,
     t_start = time.perf_counter()
     writer: VideoWriter | None = None
     recorder: Recorder | None = None
-    clock = _RecordingClock(fps)
+    clock = RecordingClock(fps)
     bar = None
     keep = False  # the outputs replace existing files only after a clean stop
     with contextlib.ExitStack() as outputs:
