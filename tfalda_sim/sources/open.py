@@ -12,7 +12,7 @@ from tfalda_sim.sources.base import FrameRange, FrameSource, SourceError
 from tfalda_sim.sources.images import ImageSource, folder_images, glob_images
 from tfalda_sim.sources.mcap_file import McapSource
 from tfalda_sim.sources.ros import RosBagSource
-from tfalda_sim.sources.video import VideoSource, opens_as_video
+from tfalda_sim.sources.video import REENCODE, VideoSource, opens_as_video
 
 KINDS = ("a video file (mp4, avi, mkv, … — any OpenCV decodes), a folder of images or a "
          "glob pattern ('clip/*.png'), a ROS 1 bag (.bag), a ROS 2 bag folder (with its "
@@ -97,8 +97,7 @@ def open_source(path: str | Path, *, topic: str | None = None,
         return VideoSource(p, frames=frames, rate_hz=rate_hz)
     if suffix in VIDEO_SUFFIXES:  # named as a video: its codec or container is the problem
         raise SourceError(f"cannot open {p}: not a video, or a container or codec this "
-                          "OpenCV build cannot decode; re-encode it, e.g. `ffmpeg -i IN -c:v "
-                          "mpeg4 -q:v 2 OUT.mp4`")
+                          f"OpenCV build cannot decode; {REENCODE}")
     raise SourceError(f"{p}: not a kind of recording this reads; give {KINDS}")
 
 
