@@ -25,15 +25,15 @@ from mcap_ros2.decoder import DecoderFactory
 
 from tfalda_sim.sources.base import CameraInfo, FrameRange, SourceError, SourceInfo
 from tfalda_sim.sources.decode import (
-    COMPRESSED,
     DecodeError,
     camera_info,
-    encoding_label,
-    encoding_note,
-    encoding_of,
-    image_of,
 )
-from tfalda_sim.sources.messages import first_frames, frame_of, optional_camera_info
+from tfalda_sim.sources.messages import (
+    first_frame,
+    first_frames,
+    frame_of,
+    optional_camera_info,
+)
 from tfalda_sim.sources.stream import (
     Loader,
     StreamSource,
@@ -96,23 +96,10 @@ class McapSource(StreamSource):
         info_topic = camera_info_topic(chosen.name, topics)
         cam, cam_note = optional_camera_info(
             None if info_topic is None else functools.partial(self._camera_info, info_topic))
-        msgtype, msg = first
-        label = encoding_label(msgtype, msg)
-        try:
-            if msgtype != COMPRESSED:
-                encoding_of(label)
-            image = image_of(msgtype, msg)
-        except DecodeError as exc:
-            raise SourceError(f"{path}: topic {chosen.name}, frame 0: {exc}") from None
-        notes = [n for n in [encoding_note(label), cam_note] if n]
-        if not self._indexed:
-            notes.append("the file has no index: frames in file order")
-        if logged:
-            notes.append(f"{logged} of the first {len(stamps)} frames have no header stamp: "
-                         "time stamps from the log times there")
-        if rate_hz is not None:
-            notes.append(f"--rate {rate_hz:g} Hz not used: the recording's time stamps "
-                         "time its frames")
+        label, image, notes = first_frame(
+            path, chosen.name, first,
+            [cam_note, None if self._indexed else "the file has no index: frames in file order"],
+            logged, len(stamps), rate_hz)
         self._stamp0 = stamps[0]
         super().__init__(SourceInfo(
             path=path, kind="mcap", width_px=image.shape[1], height_px=image.shape[0],

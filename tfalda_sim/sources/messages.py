@@ -12,7 +12,15 @@ from typing import Any
 import numpy as np
 
 from tfalda_sim.sources.base import CameraInfo, SourceError
-from tfalda_sim.sources.decode import DecodeError, image_of, stamp_ns
+from tfalda_sim.sources.decode import (
+    COMPRESSED,
+    DecodeError,
+    encoding_label,
+    encoding_note,
+    encoding_of,
+    image_of,
+    stamp_ns,
+)
 from tfalda_sim.sources.stream import RATE_SAMPLE_FRAMES
 
 Decode = Callable[[], tuple[str, Any]]
@@ -74,3 +82,28 @@ def optional_camera_info(read: Callable[[], CameraInfo | None] | None
         return read(), None
     except SourceError as exc:
         return None, f"camera_info not used: {exc}"
+
+
+def first_frame(path: Path, topic: str, first: tuple[str, Any], notes: list[str | None],
+                logged: int, sampled: int, rate_hz: float | None
+                ) -> tuple[str, np.ndarray, list[str]]:
+    """The first frame's encoding label and image (a ``SourceError`` naming the topic when
+    it does not decode: nothing of the recording could be read), and the notes of opening:
+    ``notes`` given (None: none), the encoding's, ``logged`` of the ``sampled`` first
+    frames timed by their log times, a ``--rate`` the recording's stamps replace."""
+    msgtype, msg = first
+    label = encoding_label(msgtype, msg)
+    try:
+        if msgtype != COMPRESSED:
+            encoding_of(label)
+        image = image_of(msgtype, msg)
+    except DecodeError as exc:
+        raise SourceError(f"{path}: topic {topic}, frame 0: {exc}") from None
+    out = [n for n in [encoding_note(label), *notes] if n]
+    if logged:
+        out.append(f"{logged} of the first {sampled} frames have no header stamp: time "
+                   "stamps from the log (receive) times there")
+    if rate_hz is not None:
+        out.append(f"--rate {rate_hz:g} Hz not used: the recording's time stamps time its "
+                   "frames")
+    return label, image, out

@@ -26,15 +26,15 @@ from rosbags.typesys.store import Typestore
 
 from tfalda_sim.sources.base import CameraInfo, FrameRange, SourceError, SourceInfo
 from tfalda_sim.sources.decode import (
-    COMPRESSED,
     DecodeError,
     camera_info,
-    encoding_label,
-    encoding_note,
-    encoding_of,
-    image_of,
 )
-from tfalda_sim.sources.messages import first_frames, frame_of, optional_camera_info
+from tfalda_sim.sources.messages import (
+    first_frame,
+    first_frames,
+    frame_of,
+    optional_camera_info,
+)
 from tfalda_sim.sources.stream import (
     Loader,
     StreamSource,
@@ -115,21 +115,8 @@ class RosBagSource(StreamSource):
         finally:
             with contextlib.suppress(Exception):
                 reader.close()
-        msgtype, msg = first
-        label = encoding_label(msgtype, msg)
-        try:
-            if msgtype != COMPRESSED:
-                encoding_of(label)
-            image = image_of(msgtype, msg)
-        except DecodeError as exc:
-            raise SourceError(f"{path}: topic {chosen.name}, frame 0: {exc}") from None
-        notes = [n for n in [encoding_note(label), cam_note] if n]
-        if logged:
-            notes.append(f"{logged} of the first {len(stamps)} frames have no header stamp: "
-                         "time stamps from the log (receive) times there")
-        if rate_hz is not None:
-            notes.append(f"--rate {rate_hz:g} Hz not used: the recording's time stamps "
-                         "time its frames")
+        label, image, notes = first_frame(path, chosen.name, first, [cam_note], logged,
+                                          len(stamps), rate_hz)
         self._stamp0 = stamps[0]
         super().__init__(SourceInfo(
             path=path, kind=kind, width_px=image.shape[1], height_px=image.shape[0],
