@@ -3,6 +3,7 @@ episode) one frame interval after the last frame, frames without a time spaced e
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import pytest
@@ -14,7 +15,7 @@ def test_restarts_continue_one_interval_after_the_last_frame() -> None:
     clock = RecordingClock(50.0)
     times = [clock.time(t) for t in (0.0, 0.02, 0.04, 0.0, 0.02, 0.01)]
     assert times == pytest.approx([0.0, 0.02, 0.04, 0.06, 0.08, 0.10])
-    assert all(b > a for a, b in zip(times, times[1:], strict=False))
+    assert all(b > a for a, b in itertools.pairwise(times))
 
 
 def test_frames_without_a_time_are_a_frame_interval_apart() -> None:
